@@ -1,0 +1,45 @@
+# Two commands on a fresh machine (see README.md):
+#   make reproduce   set up .venv, then run the workflow on the embedded default config
+#   make test        set up .venv with test tools, then pytest (with the end-to-end smoke run), lint, dry run
+PYTHON ?= python3
+VENV ?= .venv
+CORES ?= 2
+TARGET ?= all
+PY := $(VENV)/bin/python
+SNAKEMAKE := $(PY) -m snakemake
+STAMP := $(VENV)/.tohgs-setup
+
+.PHONY: reproduce test setup lint dryrun benchmark clean
+
+reproduce: $(STAMP)
+	$(SNAKEMAKE) --cores $(CORES) $(TARGET)
+
+test: $(STAMP)
+	$(PY) -m pytest -p no:dash
+	$(SNAKEMAKE) --lint
+	$(SNAKEMAKE) --dry-run --quiet rules --cores $(CORES) $(TARGET)
+
+setup: $(STAMP)
+
+# open3d needs the system library libusb-1.0; torch is pinned to the CPU build 2.13.0 (pyproject.toml).
+$(STAMP): pyproject.toml
+	@if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then \
+	  if [ "$$(id -u)" = "0" ]; then \
+	    echo "installing libusb-1.0-0 (needed by open3d)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libusb-1.0-0 >/dev/null; \
+	  else \
+	    echo "open3d needs libusb-1.0-0; run: sudo apt-get install -y libusb-1.0-0" >&2; exit 1; \
+	  fi; \
+	fi
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q torch==2.13.0
+	$(PY) -m pip install -q -e ".[test]"
+	@$(PY) -c "import tohgs, torch, open3d, pybullet, coacd, snakemake; print('tohgs environment ready: torch', torch.__version__)"
+	@touch $@
+
+benchmark: $(STAMP)
+	$(PY) benchmarks/bench_objects.py
+
+clean:
+	rm -rf results logs .snakemake

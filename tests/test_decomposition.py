@@ -1,0 +1,43 @@
+"""Convex decomposition: convex shortcut, CoACD on a concave brick, and the cache."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tohgs.assets.bricks import make_brick
+from tohgs.assets.decomposition import DecompositionSettings, cache_key, convex_decomposition
+
+FAST = DecompositionSettings(threshold=0.2, max_convex_hull=6, preprocess_resolution=20, resolution=500,
+                             mcts_iterations=20, mcts_depth=2, mcts_nodes=5)
+
+
+def test_convex_mesh_is_its_own_hull(tmp_path):
+    cube = make_brick("cube")
+    parts, method = convex_decomposition(cube, FAST, tmp_path)
+    assert method == "hull" and len(parts) == 1
+    assert parts[0].volume == pytest.approx(cube.volume, rel=1e-6)
+    assert not (tmp_path / "coacd").exists()
+
+
+def test_concave_mesh_is_decomposed_and_cached(tmp_path):
+    l_brick = make_brick("l-shape")
+    parts, method = convex_decomposition(l_brick, FAST, tmp_path)
+    assert method == "coacd" and len(parts) >= 2
+    for p in parts:
+        assert p.is_convex and p.volume > 0
+    # The parts cover the shape: total volume close to the brick's, and no part far outside it.
+    assert sum(p.volume for p in parts) == pytest.approx(l_brick.volume, rel=0.15)
+    assert np.all(np.ptp(np.concatenate([p.bounds for p in parts]), axis=0) <= l_brick.extents * 1.05)
+    cached, method2 = convex_decomposition(l_brick, FAST, tmp_path)
+    assert method2 == "coacd-cached"
+    assert [len(p.vertices) for p in cached] == [len(p.vertices) for p in parts]
+    np.testing.assert_allclose(cached[0].vertices, parts[0].vertices)
+
+
+def test_cache_key_changes_with_settings_and_geometry():
+    m = make_brick("l-shape")
+    k = cache_key(m, FAST)
+    assert k == cache_key(m, FAST)
+    assert k != cache_key(m, DecompositionSettings(**{**FAST.__dict__, "threshold": 0.3}))
+    assert k != cache_key(make_brick("l-shape", scale=1.1), FAST)

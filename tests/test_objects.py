@@ -1,0 +1,93 @@
+"""The objects stage for single objects, the catalog and its split by object."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pybullet as p
+import pytest
+
+from tohgs.assets.objects import assign_splits, prepare_object, read_catalog, write_catalog
+from tohgs.assets.sources import ObjectSpec, TASK_SET_OBJECTS
+from tohgs.config import validate_config
+
+CFG = validate_config({})["objects"]
+FAST = {**CFG["decomposition"], "threshold": 0.2, "max_convex_hull": 6, "preprocess_resolution": 20,
+        "resolution": 500, "mcts_iterations": 20, "mcts_nodes": 5}
+
+
+def _prepare(spec, out, cache):
+    return prepare_object(spec, out, CFG["size"], 1.0, FAST, CFG["density"], 0, cache)
+
+
+def test_brick_object_folder_and_urdf(tmp_path):
+    spec = ObjectSpec("brick-u-shape", "bricks", "stacking", None, "u-shape")
+    meta = _prepare(spec, tmp_path / "brick-u-shape", tmp_path / "cache")
+    d = tmp_path / "brick-u-shape"
+    assert meta["status"] == "ok"
+    assert sorted(f.name for f in d.iterdir()) == ["collision.obj", "mesh.obj", "meta.json", "object.urdf"]
+    assert json.loads((d / "meta.json").read_text())["n_collision_parts"] == meta["n_collision_parts"] >= 2
+    assert meta["mass"] == pytest.approx(meta["volume"] * CFG["density"])
+    cid = p.connect(p.DIRECT)
+    try:
+        body = p.loadURDF(str(d / "object.urdf"), physicsClientId=cid)
+        assert p.getDynamicsInfo(body, -1, physicsClientId=cid)[0] == pytest.approx(meta["mass"], rel=1e-6)
+        # The collision shape is the compound of convex parts, not one hull: a vertical ray through the
+        # U's slot (x = 0, y > 0 in the normalised frame) passes, one through the base hits its top.
+        hit_slot = p.rayTest([0, 0.02, 1], [0, 0.02, -1], physicsClientId=cid)[0][0]
+        hit_base = p.rayTest([0, -0.02, 1], [0, -0.02, -1], physicsClientId=cid)[0]
+        assert hit_slot == -1
+        assert hit_base[0] == body and hit_base[3][2] == pytest.approx(meta["bounds"][1][2], abs=2e-3)
+    finally:
+        p.disconnect(cid)
+
+
+def test_mesh_object_is_rescaled_into_the_graspable_range(tmp_path):
+    from tohgs.assets.sources import pybullet_named_candidates
+
+    duck = next(c for c in pybullet_named_candidates() if c.name == "pb-duck")
+    meta = _prepare(duck, tmp_path / duck.name, None)
+    ext = np.sort(meta["extents"])
+    assert CFG["size"]["longest_min"] - 1e-9 <= ext[2] <= CFG["size"]["longest_max"] + 1e-9
+    assert CFG["size"]["thickness_min"] - 1e-9 <= ext[0] <= CFG["size"]["thickness_max"] + 1e-9
+    again = _prepare(duck, tmp_path / "again", None)
+    assert again["scale"] == meta["scale"], "the scale draw is not deterministic"
+
+
+def test_broken_file_is_recorded_as_rejected(tmp_path):
+    bad = tmp_path / "broken.obj"
+    bad.write_text("v nan nan nan\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    spec = ObjectSpec("dir-broken", "dir", TASK_SET_OBJECTS, str(bad))
+    meta = _prepare(spec, tmp_path / "dir-broken", None)
+    assert meta["status"] == "rejected" and "non-finite" in meta["reason"]
+    assert [f.name for f in (tmp_path / "dir-broken").iterdir()] == ["meta.json"]
+
+
+def test_assign_splits_is_by_object_and_deterministic():
+    names = [f"obj-{i}" for i in range(20)]
+    s = assign_splits(names, 0.2, 0.1, np.random.default_rng(3))
+    assert sorted(s) == sorted(names)
+    assert list(s.values()).count("test") == 4 and list(s.values()).count("val") == 2
+    assert s == assign_splits(list(reversed(names)), 0.2, 0.1, np.random.default_rng(3))
+    assert list(assign_splits(["a", "b"], 0.01, 0.0, np.random.default_rng(0)).values()).count("test") == 1
+
+
+def test_catalog_from_folders(tmp_path):
+    specs = [ObjectSpec("brick-cube", "bricks", "stacking", None, "cube"),
+             ObjectSpec("brick-disc", "bricks", "stacking", None, "disc"),
+             ObjectSpec("dir-missing", "dir", TASK_SET_OBJECTS, str(tmp_path / "missing.obj"))]
+    dirs = []
+    for s in specs:
+        _prepare(s, tmp_path / "objects" / s.name, None)
+        dirs.append(tmp_path / "objects" / s.name)
+    split = {"objects": {"test": 0.2, "val": 0.0}, "bricks": {"test": 0.5, "val": 0.0}}
+    write_catalog(dirs, split, 0, tmp_path / "objects" / "catalog.csv")
+    full = read_catalog(tmp_path / "objects" / "catalog.csv", status=None)
+    assert len(full) == 3
+    rej = full[full.name == "dir-missing"].iloc[0]
+    assert rej.status == "rejected" and "file not found" in rej.reason and rej.split == ""
+    ok = read_catalog(tmp_path / "objects" / "catalog.csv")
+    assert sorted(ok.split) == ["test", "train"]
+    with pytest.raises(FileNotFoundError, match="meta.json"):
+        write_catalog([tmp_path / "nowhere"], split, 0, tmp_path / "c.csv")

@@ -1,0 +1,133 @@
+"""Convex decomposition for simulation, with CoACD and a content-addressed cache.
+
+PyBullet simulates a dynamic mesh as a compound of convex hulls. ``pybullet.vhacd`` segfaults in pybullet
+3.2.7 (seen here), so tohgs uses CoACD (collision-aware approximate convex decomposition). A mesh that is
+already (nearly) convex is its own decomposition: its convex hull is used without running CoACD.
+
+Results are cached under ``<cache_dir>/coacd/<sha256>.npz``, keyed by the mesh's vertices and faces, the
+CoACD settings and CoACD's version, so a rerun after an unrelated setting change costs nothing.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from tohgs.io import atomic_path
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class DecompositionSettings:
+    """CoACD settings (see the CoACD paper) plus tohgs's convexity shortcut.
+
+    Attributes:
+        threshold: CoACD concavity threshold (smaller = more, tighter parts).
+        max_convex_hull: upper bound on the number of parts (-1 = none).
+        preprocess_resolution: voxel resolution of CoACD's manifold pre-processing.
+        resolution: surface sampling resolution for the concavity metric.
+        mcts_iterations, mcts_depth, mcts_nodes: CoACD's tree-search budget.
+        convex_tolerance: a mesh whose volume is at least (1 - tolerance) x its hull's volume is treated
+            as convex and decomposed into its hull alone.
+        seed: CoACD's random seed.
+    """
+
+    threshold: float = 0.1
+    max_convex_hull: int = 12
+    preprocess_resolution: int = 30
+    resolution: int = 1000
+    mcts_iterations: int = 60
+    mcts_depth: int = 2
+    mcts_nodes: int = 10
+    convex_tolerance: float = 0.01
+    seed: int = 0
+
+
+def _coacd_version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("coacd")
+    except Exception:  # pragma: no cover - metadata missing in odd installs
+        return "unknown"
+
+
+def cache_key(mesh: trimesh.Trimesh, settings: DecompositionSettings) -> str:
+    """SHA-256 of the mesh geometry, the settings and the CoACD version."""
+    h = hashlib.sha256()
+    h.update(np.ascontiguousarray(mesh.vertices, dtype=np.float64).tobytes())
+    h.update(np.ascontiguousarray(mesh.faces, dtype=np.int64).tobytes())
+    h.update(json.dumps(settings.__dict__, sort_keys=True).encode())
+    h.update(_coacd_version().encode())
+    return h.hexdigest()
+
+
+def _run_coacd(mesh: trimesh.Trimesh, s: DecompositionSettings) -> list[trimesh.Trimesh]:
+    import coacd
+
+    coacd.set_log_level("error")
+    parts = coacd.run_coacd(
+        coacd.Mesh(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)),
+        threshold=s.threshold, max_convex_hull=s.max_convex_hull, preprocess_mode="auto",
+        preprocess_resolution=s.preprocess_resolution, resolution=s.resolution,
+        mcts_iterations=s.mcts_iterations, mcts_max_depth=s.mcts_depth, mcts_nodes=s.mcts_nodes, seed=s.seed,
+    )
+    out = []
+    for verts, faces in parts:
+        hull = trimesh.Trimesh(np.asarray(verts, dtype=np.float64), np.asarray(faces, dtype=np.int64)).convex_hull
+        if hull.volume > 0:
+            out.append(hull)
+    return out
+
+
+def _save_parts(path: Path, parts: list[trimesh.Trimesh]) -> None:
+    arrays = {}
+    for i, p in enumerate(parts):
+        arrays[f"v{i}"] = np.asarray(p.vertices, dtype=np.float64)
+        arrays[f"f{i}"] = np.asarray(p.faces, dtype=np.int64)
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        np.savez(fh, n=np.int64(len(parts)), **arrays)
+
+
+def _load_parts(path: Path) -> list[trimesh.Trimesh]:
+    with np.load(path) as z:
+        return [trimesh.Trimesh(z[f"v{i}"], z[f"f{i}"], process=False) for i in range(int(z["n"]))]
+
+
+def convex_decomposition(mesh: trimesh.Trimesh, settings: DecompositionSettings,
+                         cache_dir: str | Path | None = None) -> tuple[list[trimesh.Trimesh], str]:
+    """Decompose a watertight mesh into convex parts for simulation.
+
+    Args:
+        mesh: normalised watertight mesh, metres.
+        settings: CoACD settings.
+        cache_dir: cache root (``None`` disables the cache).
+
+    Returns:
+        ``(parts, method)``: convex hulls (each a ``Trimesh``) and how they were made:
+        ``"hull"`` (convex mesh), ``"coacd"`` or ``"coacd-cached"``.
+    """
+    hull = mesh.convex_hull
+    if mesh.volume >= (1.0 - settings.convex_tolerance) * hull.volume:
+        return [hull], "hull"
+    key = cache_key(mesh, settings)
+    path = Path(cache_dir) / "coacd" / f"{key}.npz" if cache_dir is not None else None
+    if path is not None and path.is_file():
+        try:
+            return _load_parts(path), "coacd-cached"
+        except Exception as exc:  # a corrupt cache entry is recomputed, not trusted
+            log.warning("ignoring unreadable cache entry %s (%s)", path, exc)
+    parts = _run_coacd(mesh, settings)
+    if not parts:
+        parts = [hull]
+        log.warning("CoACD returned no part with positive volume; using the convex hull")
+    if path is not None:
+        _save_parts(path, parts)
+    return parts, "coacd"

@@ -1,0 +1,225 @@
+"""The objects stage: turn one selected object into a normalised, simulation-ready asset, and the catalog.
+
+Per object, :func:`prepare_object` writes ``results/objects/<name>/``:
+
+- ``mesh.obj``: the normalised watertight mesh (metres, centre of mass at the origin, source orientation).
+- ``collision.obj``: its convex decomposition, one ``o part_k`` group per convex part (PyBullet loads such a
+  file as a compound of convex hulls).
+- ``object.urdf``: a single-link URDF with ``mesh.obj`` as visual, ``collision.obj`` as collision and the
+  mass properties at the configured density.
+- ``meta.json``: the spec, status (``ok`` / ``rejected``), rejection reason, repairs, scale, extents,
+  volume, mass and inertia. A rejected object's folder holds only ``meta.json``.
+
+:func:`write_catalog` gathers every ``meta.json`` into ``catalog.csv`` and assigns the train/val/test split
+by object, per task set, deterministically for the seed.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+import zlib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import trimesh
+
+from tohgs.assets.bricks import make_brick
+from tohgs.assets.decomposition import DecompositionSettings, convex_decomposition
+from tohgs.assets.mesh import MeshError, choose_scale, load_mesh, mass_properties, normalise, repair_and_validate
+from tohgs.assets.sources import TASK_SET_BRICKS, TASK_SET_OBJECTS, ObjectSpec
+from tohgs.io import atomic_dir, atomic_path, write_json
+
+log = logging.getLogger(__name__)
+
+CATALOG_COLUMNS = [
+    "name", "source", "task_set", "split", "status", "reason", "scale", "extent_x", "extent_y", "extent_z",
+    "volume", "mass", "watertight", "repairs", "n_collision_parts", "decomposition", "source_path",
+]
+
+
+def object_rng(seed: int, name: str) -> np.random.Generator:
+    """The generator of one object's random choices: depends only on the seed and the object's name."""
+    return np.random.default_rng([seed, zlib.crc32(name.encode())])
+
+
+def _write_obj_parts(path: Path, parts: list[trimesh.Trimesh]) -> None:
+    lines, offset = [], 1
+    for k, p in enumerate(parts):
+        lines.append(f"o part_{k}")
+        lines += [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in p.vertices]
+        lines += [f"f {a + offset} {b + offset} {c + offset}" for a, b, c in p.faces]
+        offset += len(p.vertices)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _urdf(name: str, mass: float, inertia: np.ndarray) -> str:
+    i = inertia
+    return f"""<?xml version="1.0"?>
+<robot name="{name}">
+  <link name="{name}">
+    <inertial>
+      <origin xyz="0 0 0" rpy="0 0 0"/>
+      <mass value="{mass:.9g}"/>
+      <inertia ixx="{i[0, 0]:.9g}" ixy="{i[0, 1]:.9g}" ixz="{i[0, 2]:.9g}" iyy="{i[1, 1]:.9g}" iyz="{i[1, 2]:.9g}" izz="{i[2, 2]:.9g}"/>
+    </inertial>
+    <visual><geometry><mesh filename="mesh.obj"/></geometry></visual>
+    <collision><geometry><mesh filename="collision.obj"/></geometry></collision>
+  </link>
+</robot>
+"""
+
+
+def build_object_mesh(spec: ObjectSpec, size: dict[str, float], brick_scale: float, seed: int
+                      ) -> tuple[trimesh.Trimesh, float, list[str]]:
+    """Load (or generate), repair, validate and normalise one object.
+
+    Args:
+        spec: the selected object.
+        size: ``objects.size`` (longest_min/max, thickness_min/max, metres) for non-brick objects.
+        brick_scale: uniform scale applied to the designed bricks.
+        seed: global seed (the scale draw uses :func:`object_rng`).
+
+    Returns:
+        ``(mesh, scale, repairs)``: normalised mesh in metres, the scale applied to the source, repairs.
+
+    Raises:
+        MeshError: the object is unusable; the message is the rejection reason.
+    """
+    if spec.source == "bricks":
+        raw = make_brick(spec.brick)
+    else:
+        raw = load_mesh(spec.path)
+    mesh, repairs = repair_and_validate(raw)
+    if spec.source == "bricks":
+        scale = float(brick_scale)
+    else:
+        scale = choose_scale(mesh.extents, (size["longest_min"], size["longest_max"]),
+                             (size["thickness_min"], size["thickness_max"]), object_rng(seed, spec.name))
+    mesh = normalise(mesh, scale)
+    if not (mesh.is_watertight and mesh.volume > 0):
+        raise MeshError("not watertight or non-positive volume after normalisation")
+    return mesh, scale, repairs
+
+
+def prepare_object(spec: dict[str, Any] | ObjectSpec, out_dir: str | Path, size: dict[str, float],
+                   brick_scale: float, decomposition: dict[str, Any], density: float, seed: int,
+                   cache_dir: str | Path | None) -> dict[str, Any]:
+    """Run the objects stage for one object and write its folder atomically.
+
+    A bad mesh does not raise: the folder then holds a ``meta.json`` with ``status: rejected`` and the
+    reason, so the rest of the run proceeds.
+
+    Returns:
+        The metadata written to ``meta.json``.
+    """
+    spec = spec if isinstance(spec, ObjectSpec) else ObjectSpec(**spec)
+    t0 = time.perf_counter()
+    meta: dict[str, Any] = {**spec.to_dict(), "status": "ok", "reason": ""}
+    out_dir = Path(out_dir)
+    with atomic_dir(out_dir) as tmp:
+        try:
+            mesh, scale, repairs = build_object_mesh(spec, size, brick_scale, seed)
+        except MeshError as exc:
+            meta.update(status="rejected", reason=str(exc))
+            log.warning("%s rejected: %s", spec.name, exc)
+            write_json(tmp / "meta.json", meta)
+            return meta
+        settings = DecompositionSettings(**decomposition)
+        parts, method = convex_decomposition(mesh, settings, cache_dir)
+        mp = mass_properties(mesh, density)
+        mesh.export(tmp / "mesh.obj")
+        _write_obj_parts(tmp / "collision.obj", parts)
+        (tmp / "object.urdf").write_text(_urdf(spec.name, mp.mass, mp.inertia))
+        meta.update(
+            scale=scale, extents=mesh.extents.tolist(), bounds=mesh.bounds.tolist(), volume=mp.volume,
+            mass=mp.mass, density=density, inertia=mp.inertia.tolist(), watertight=bool(mesh.is_watertight),
+            repairs=repairs, n_vertices=len(mesh.vertices), n_faces=len(mesh.faces),
+            n_collision_parts=len(parts), decomposition=method,
+            collision_volume=float(sum(p.volume for p in parts)),
+        )
+        write_json(tmp / "meta.json", meta)
+    log.info("%s: %s, scale %.4g, extents %s m, %d collision parts (%s), %.2f s", spec.name, meta["status"],
+             scale, np.round(meta["extents"], 4).tolist(), len(parts), method, time.perf_counter() - t0)
+    return meta
+
+
+def assign_splits(names: list[str], test_fraction: float, val_fraction: float, rng: np.random.Generator
+                  ) -> dict[str, str]:
+    """Split object names into ``train``/``val``/``test`` (by object: no object is in two splits).
+
+    ``round(fraction x n)`` objects go to test (at least one when the fraction is positive and there are
+    two or more objects), then to val, the rest to train.
+    """
+    n = len(names)
+    n_test = int(round(test_fraction * n))
+    if test_fraction > 0 and n >= 2:
+        n_test = max(n_test, 1)
+    n_test = min(n_test, n - 1) if n >= 2 else 0
+    n_val = min(int(round(val_fraction * n)), n - n_test - 1) if n - n_test >= 2 else 0
+    order = rng.permutation(sorted(names))
+    split = {str(nm): "test" for nm in order[:n_test]}
+    split.update({str(nm): "val" for nm in order[n_test:n_test + n_val]})
+    split.update({str(nm): "train" for nm in order[n_test + n_val:]})
+    return split
+
+
+def write_catalog(object_dirs: list[str | Path], split_cfg: dict[str, dict[str, float]], seed: int,
+                  out_csv: str | Path) -> pd.DataFrame:
+    """Gather the objects' ``meta.json`` into ``catalog.csv`` with the split by object.
+
+    Args:
+        object_dirs: the per-object folders of the objects stage.
+        split_cfg: ``objects.split``: ``{"objects": {"test": f, "val": f}, "bricks": {...}}``.
+        seed: global seed.
+        out_csv: the catalog path.
+
+    Returns:
+        The catalog (one row per selected object; rejected objects have split ``""``).
+    """
+    rows = []
+    for d in object_dirs:
+        meta_path = Path(d) / "meta.json"
+        if not meta_path.is_file():
+            raise FileNotFoundError(f"{meta_path}: missing; the objects stage did not finish for this object")
+        m = json.loads(meta_path.read_text())
+        ext = m.get("extents", [np.nan] * 3)
+        rows.append({
+            "name": m["name"], "source": m["source"], "task_set": m["task_set"], "split": "",
+            "status": m["status"], "reason": m.get("reason", ""), "scale": m.get("scale", np.nan),
+            "extent_x": ext[0], "extent_y": ext[1], "extent_z": ext[2], "volume": m.get("volume", np.nan),
+            "mass": m.get("mass", np.nan), "watertight": m.get("watertight", False),
+            "repairs": "; ".join(m.get("repairs", [])), "n_collision_parts": m.get("n_collision_parts", 0),
+            "decomposition": m.get("decomposition", ""), "source_path": m.get("path") or "",
+        })
+    df = pd.DataFrame(rows, columns=CATALOG_COLUMNS)
+    for k, (task_set, key) in enumerate([(TASK_SET_OBJECTS, "objects"), (TASK_SET_BRICKS, "bricks")]):
+        ok = df[(df.task_set == task_set) & (df.status == "ok")].name.tolist()
+        split = assign_splits(ok, split_cfg[key]["test"], split_cfg[key]["val"], np.random.default_rng([seed, 10 + k]))
+        df.loc[df.name.isin(ok), "split"] = df.loc[df.name.isin(ok), "name"].map(split)
+    df = df.sort_values(["task_set", "name"], kind="stable").reset_index(drop=True)
+    with atomic_path(out_csv) as tmp:
+        df.to_csv(tmp, index=False)
+    n_ok = int((df.status == "ok").sum())
+    log.info("catalog: %d objects, %d accepted, %d rejected", len(df), n_ok, len(df) - n_ok)
+    for _, r in df[df.status != "ok"].iterrows():
+        log.info("rejected %s: %s", r["name"], r["reason"])
+    return df
+
+
+def read_catalog(path: str | Path, status: str | None = "ok") -> pd.DataFrame:
+    """Read ``catalog.csv``, checking its columns; by default only accepted objects.
+
+    Raises:
+        ValueError: a missing column (names the file and the columns).
+    """
+    df = pd.read_csv(path, keep_default_na=False, na_values=[""])
+    missing = set(CATALOG_COLUMNS) - set(df.columns)
+    if missing:
+        raise ValueError(f"{path}: not a tohgs catalog, missing columns {sorted(missing)}")
+    df["split"] = df["split"].fillna("")
+    df["reason"] = df["reason"].fillna("")
+    return df if status is None else df[df.status == status].reset_index(drop=True)

@@ -1,0 +1,169 @@
+"""Object sources and the deterministic selection of the objects a run uses.
+
+Three sources, each giving objects a stable name (the Snakemake wildcard):
+
+- ``pybullet_data``: the procedurally generated ``random_urdfs/NNN/NNN.obj`` (names ``pb-rand-NNN``) and a
+  curated list of named household meshes shipped with the package (names ``pb-<stem>``).
+- ``bricks``: the 23 generated bricks of :mod:`tohgs.assets.bricks` (names ``brick-<shape>``), the Stacking set.
+- ``dir``: every .obj/.stl/.ply file in a user folder (names ``dir-<stem>``).
+
+Selection reads only file names, never mesh contents, so it is cheap enough to run when Snakemake parses
+the workflow; validation happens per object later and rejections are recorded in the catalog.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tohgs.assets.bricks import brick_names
+from tohgs.assets.mesh import MESH_SUFFIXES
+
+#: Task sets: placing/shelving objects, and the stacking bricks.
+TASK_SET_OBJECTS = "placing/shelving"
+TASK_SET_BRICKS = "stacking"
+
+#: Named household meshes of pybullet_data that are candidates (paths relative to its data folder).
+#: Some do not pass validation (for example the mug, open at its rim): they are recorded as rejected.
+PYBULLET_NAMED = (
+    "bunny.obj", "duck.obj", "soccerball.obj", "sphere_smooth.obj", "stone.obj", "objects/mug.obj",
+    "jenga/jenga.obj", "domino/domino.obj", "torus/torus_textured.obj", "toys/cylinder.obj",
+    "toys/prism.obj", "toys/shape_sorter.obj", "toys/cube.obj", "lego/lego.obj", "teddy2_VHACD_CHs.obj",
+)
+
+_NAME_RE = re.compile(r"[^a-z0-9]+")
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    """One selected object.
+
+    Attributes:
+        name: the stable identifier, ``[a-z0-9-]+``; also the folder name under ``results/objects``.
+        source: ``pybullet_data`` | ``bricks`` | ``dir``.
+        task_set: :data:`TASK_SET_OBJECTS` or :data:`TASK_SET_BRICKS`.
+        path: absolute path of the source mesh file, or ``None`` for generated bricks.
+        brick: the brick shape name for ``bricks``, else ``None``.
+    """
+
+    name: str
+    source: str
+    task_set: str
+    path: str | None = None
+    brick: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def pybullet_data_root() -> Path:
+    """The folder of the installed ``pybullet_data`` package."""
+    import pybullet_data
+
+    return Path(pybullet_data.getDataPath())
+
+
+def sanitise(stem: str) -> str:
+    """Lower-case a file stem into the wildcard alphabet ``[a-z0-9-]``."""
+    out = _NAME_RE.sub("-", stem.lower()).strip("-")
+    if not out:
+        raise ValueError(f"cannot make an object name from '{stem}'")
+    return out
+
+
+def pybullet_random_candidates(root: Path | None = None) -> list[ObjectSpec]:
+    """The procedurally generated objects under ``random_urdfs`` (about 1000), sorted by name."""
+    root = pybullet_data_root() if root is None else root
+    files = sorted((root / "random_urdfs").glob("*/*.obj"))
+    return [ObjectSpec(f"pb-rand-{f.stem}", "pybullet_data", TASK_SET_OBJECTS, str(f)) for f in files]
+
+
+def pybullet_named_candidates(root: Path | None = None) -> list[ObjectSpec]:
+    """The curated named household meshes of pybullet_data that exist in this installation."""
+    root = pybullet_data_root() if root is None else root
+    out = []
+    for rel in PYBULLET_NAMED:
+        f = root / rel
+        if f.is_file():
+            out.append(ObjectSpec(f"pb-{sanitise(f.stem)}", "pybullet_data", TASK_SET_OBJECTS, str(f)))
+    return out
+
+
+def brick_candidates() -> list[ObjectSpec]:
+    """The 23 bricks, in their stable order."""
+    return [ObjectSpec(f"brick-{b}", "bricks", TASK_SET_BRICKS, None, b) for b in brick_names()]
+
+
+def dir_candidates(folder: str | Path) -> list[ObjectSpec]:
+    """Every mesh file (.obj/.stl/.ply) directly in ``folder``, sorted; duplicate stems get a suffix.
+
+    Raises:
+        FileNotFoundError: the folder does not exist.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileNotFoundError(f"objects.sources.dir.path: folder '{folder}' does not exist")
+    files = sorted(f for f in folder.iterdir() if f.is_file() and f.suffix.lower() in MESH_SUFFIXES)
+    out, seen = [], set()
+    for f in files:
+        name = f"dir-{sanitise(f.stem)}"
+        if name in seen:
+            name = f"{name}-{f.suffix.lower().lstrip('.')}"
+        seen.add(name)
+        out.append(ObjectSpec(name, "dir", TASK_SET_OBJECTS, str(f.resolve())))
+    return out
+
+
+def _choose(candidates: list[ObjectSpec], count: int | None, rng: np.random.Generator, key: str) -> list[ObjectSpec]:
+    if count is None or count == len(candidates):
+        return list(candidates)
+    if count > len(candidates):
+        raise ValueError(f"config key '{key}': asks for {count} objects but only {len(candidates)} are available")
+    idx = np.sort(rng.choice(len(candidates), size=count, replace=False))
+    return [candidates[i] for i in idx]
+
+
+def select_objects(objects_cfg: dict[str, Any], seed: int, base_dir: str | Path = ".") -> list[ObjectSpec]:
+    """Select the run's objects from the ``objects`` config block, deterministically for ``seed``.
+
+    Each source draws from its own generator (seeded from ``seed`` and the source), so changing one
+    source's count does not change another's selection.
+
+    Args:
+        objects_cfg: the validated ``objects`` block of the config.
+        seed: the global seed.
+        base_dir: folder that a relative ``sources.dir.path`` is resolved against.
+
+    Returns:
+        The selected objects, sources in the order pybullet_data, bricks, dir, each sorted by name.
+
+    Raises:
+        ValueError: a count exceeds its pool, or the selection is empty.
+    """
+    src = objects_cfg["sources"]
+    pb = src["pybullet_data"]
+    selected: list[ObjectSpec] = []
+    selected += _choose(pybullet_random_candidates(), pb["random_urdfs"], np.random.default_rng([seed, 1]),
+                        "objects.sources.pybullet_data.random_urdfs")
+    selected += _choose(pybullet_named_candidates(), pb["named"], np.random.default_rng([seed, 2]),
+                        "objects.sources.pybullet_data.named")
+    selected += _choose(brick_candidates(), src["bricks"]["count"], np.random.default_rng([seed, 3]),
+                        "objects.sources.bricks.count")
+    if src["dir"]["path"] is not None:
+        folder = Path(src["dir"]["path"])
+        folder = folder if folder.is_absolute() else Path(base_dir) / folder
+        cands = dir_candidates(folder)
+        count = src["dir"]["count"]
+        selected += _choose(cands, None if count == 0 else min(count, len(cands)),
+                            np.random.default_rng([seed, 4]), "objects.sources.dir.count")
+    if not selected:
+        raise ValueError("objects.sources: the selection is empty; ask for at least one object")
+    names = [s.name for s in selected]
+    dup = {n for n in names if names.count(n) > 1}
+    if dup:
+        raise ValueError(f"objects.sources: duplicate object names {sorted(dup)}")
+    return selected

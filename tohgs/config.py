@@ -1,0 +1,138 @@
+"""Configuration: schema validation with defaults, and the checks a JSON schema cannot express.
+
+The schema lives in ``workflow/schemas/config.schema.yaml``; every key in it has a ``description`` and a
+``default``. :func:`validate_config` fills the defaults in place, then raises :class:`ConfigError` naming
+the first offending key (dotted path) and the problem. The workflow calls it at parse time, so an invalid
+config stops Snakemake before any job runs.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import yaml
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+SCHEMA_PATH = REPO_ROOT / "workflow" / "schemas" / "config.schema.yaml"
+
+
+class ConfigError(ValueError):
+    """An invalid configuration; the message names the key and the problem."""
+
+
+def load_schema(path: Path | str = SCHEMA_PATH) -> dict[str, Any]:
+    """Read the YAML JSON-schema of the workflow configuration."""
+    with open(path) as fh:
+        return yaml.safe_load(fh)
+
+
+def _key_path(parts: Any) -> str:
+    return ".".join(str(p) for p in parts) or "<root>"
+
+
+def _fill_defaults(instance: Any, schema: Mapping[str, Any]) -> None:
+    """Insert schema defaults for missing object properties, recursively (in place)."""
+    if not isinstance(instance, dict) or schema.get("type") != "object":
+        return
+    for key, sub in schema.get("properties", {}).items():
+        if key not in instance and "default" in sub:
+            instance[key] = copy.deepcopy(sub["default"])
+        if key in instance:
+            _fill_defaults(instance[key], sub)
+
+
+def _error_message(err: jsonschema.ValidationError) -> str:
+    where = _key_path(err.absolute_path)
+    if err.validator == "additionalProperties":
+        allowed = sorted(err.schema.get("properties", {}))
+        extra = sorted(set(err.instance) - set(allowed))
+        where_unknown = ".".join(filter(None, [where if where != "<root>" else "", extra[0]]))
+        return f"config key '{where_unknown}': unknown key (allowed here: {', '.join(allowed)})"
+    if err.validator == "type":
+        return (f"config key '{where}': expected {err.validator_value}, "
+                f"got {type(err.instance).__name__} {err.instance!r}")
+    if err.validator in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
+        return f"config key '{where}': value {err.instance!r} is out of range ({err.validator} {err.validator_value})"
+    if err.validator == "enum":
+        return f"config key '{where}': {err.instance!r} is not one of {err.validator_value}"
+    return f"config key '{where}': {err.message}"
+
+
+def iter_schema_keys(schema: Mapping[str, Any], prefix: tuple[str, ...] = ()) -> Iterator[tuple[tuple[str, ...], Mapping[str, Any]]]:
+    """Yield ``(dotted key parts, sub-schema)`` for every property in the schema, depth first."""
+    for key, sub in schema.get("properties", {}).items():
+        yield prefix + (key,), sub
+        if sub.get("type") == "object":
+            yield from iter_schema_keys(sub, prefix + (key,))
+
+
+def _semantic_checks(cfg: Mapping[str, Any], base_dir: Path) -> None:
+    """Checks beyond the JSON schema: ordered ranges, existing paths, non-empty selections."""
+    obj = cfg["objects"]
+    lo, hi = obj["size"]["longest_min"], obj["size"]["longest_max"]
+    if lo > hi:
+        raise ConfigError(f"config key 'objects.size.longest_min': {lo} is larger than objects.size.longest_max = {hi}")
+    tmin, tmax = obj["size"]["thickness_min"], obj["size"]["thickness_max"]
+    if tmin > tmax:
+        raise ConfigError(f"config key 'objects.size.thickness_min': {tmin} is larger than objects.size.thickness_max = {tmax}")
+    src = obj["sources"]
+    dir_path = src["dir"]["path"]
+    if dir_path is not None:
+        p = Path(dir_path)
+        if not p.is_absolute():
+            p = base_dir / p
+        if not p.is_dir():
+            raise ConfigError(f"config key 'objects.sources.dir.path': folder '{dir_path}' does not exist")
+    n_total = src["pybullet_data"]["random_urdfs"] + src["pybullet_data"]["named"] + src["bricks"]["count"]
+    if n_total == 0 and dir_path is None:
+        raise ConfigError("config key 'objects.sources': the selection is empty (no pybullet_data objects, "
+                          "no bricks and no dir.path)")
+
+
+def validate_config(cfg: dict[str, Any], schema: Mapping[str, Any] | None = None,
+                    base_dir: Path | str | None = None) -> dict[str, Any]:
+    """Validate ``cfg`` against the schema, filling defaults in place.
+
+    Args:
+        cfg: the configuration as Snakemake (or a test) loaded it; modified in place.
+        schema: the schema; defaults to ``workflow/schemas/config.schema.yaml``.
+        base_dir: folder that relative paths in the config are resolved against (the working directory).
+
+    Returns:
+        ``cfg`` itself, with defaults filled.
+
+    Raises:
+        ConfigError: the first problem found, naming the key (e.g. ``objects.size.longest_min``).
+    """
+    schema = load_schema() if schema is None else schema
+    base = Path.cwd() if base_dir is None else Path(base_dir)
+    if not isinstance(cfg, dict):
+        raise ConfigError(f"config: expected a mapping at the top level, got {type(cfg).__name__}")
+    _fill_defaults(cfg, schema)
+    validator = jsonschema.Draft202012Validator(schema)
+    errors = sorted(validator.iter_errors(cfg), key=lambda e: (len(e.absolute_path), list(map(str, e.absolute_path))))
+    if errors:
+        raise ConfigError(_error_message(errors[0]))
+    _semantic_checks(cfg, base)
+    return cfg
+
+
+def load_config(path: Path | str, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Load a YAML config file, apply nested ``overrides``, validate and return it (for library users)."""
+    with open(path) as fh:
+        cfg = yaml.safe_load(fh) or {}
+    if overrides:
+        _deep_update(cfg, overrides)
+    return validate_config(cfg)
+
+
+def _deep_update(dst: dict[str, Any], src: Mapping[str, Any]) -> None:
+    for k, v in src.items():
+        if isinstance(v, Mapping) and isinstance(dst.get(k), dict):
+            _deep_update(dst[k], v)
+        else:
+            dst[k] = copy.deepcopy(v)

@@ -1,0 +1,1 @@
+"""Figures: meshes, scenes, grasps and maps rendered headless with matplotlib."""

@@ -1,0 +1,79 @@
+# Configuration validation, the object selection, wildcard constraints and helper functions.
+import os
+import sys
+from pathlib import Path
+
+REPO = Path(workflow.basedir).parent
+if str(REPO) not in sys.path:  # parse time only; jobs import the installed package (pip install -e .)
+    sys.path.insert(0, str(REPO))
+
+from tohgs.config import ConfigError, validate_config
+from tohgs.assets.sources import select_objects
+
+try:
+    validate_config(config)
+except ConfigError as err:
+    raise WorkflowError(f"invalid configuration: {err}") from None
+
+try:
+    OBJECTS = {spec.name: spec for spec in select_objects(config["objects"], config["seed"])}
+except (ValueError, FileNotFoundError) as err:
+    raise WorkflowError(f"invalid configuration: {err}") from None
+
+OBJECT_NAME = "(pb|brick|dir)-[a-z0-9-]+"  # the {object} wildcard (see tohgs.assets.sources)
+
+
+def code(*packages):
+    """The tohgs source files of the given packages: the code inputs of a job, so an edit makes it stale."""
+    files = []
+    for pkg in packages:
+        files += sorted((REPO / "tohgs" / pkg).glob("*.py"))
+    return [os.path.relpath(f) for f in files]
+
+
+def _canonical(value):
+    """Mappings with sorted keys, recursively: params compare by repr, so key order must not matter."""
+    if isinstance(value, dict):
+        return {k: _canonical(value[k]) for k in sorted(value)}
+    if isinstance(value, list):
+        return [_canonical(v) for v in value]
+    return value
+
+
+def setting(*keys):
+    """The config value at ``keys`` (e.g. ``setting("objects", "density")``) for a rule's params."""
+    value = config
+    for k in keys:
+        value = value[k]
+    return _canonical(value)
+
+
+def object_dirs():
+    """Every selected object's folder (accepted or rejected: the catalog records which)."""
+    return expand("results/objects/{object}", object=sorted(OBJECTS))
+
+
+def object_source(wildcards):
+    """The source mesh of a file-based object (none for generated bricks)."""
+    spec = OBJECTS[wildcards.object]
+    return [spec.path] if spec.path else []
+
+
+def object_spec(wildcards):
+    return _canonical(OBJECTS[wildcards.object].to_dict())
+
+
+def object_size(wildcards):
+    """Size settings that apply to this object: the size range (and seed) for meshes, the scale for bricks."""
+    if OBJECTS[wildcards.object].source == "bricks":
+        return {"brick_scale": setting("objects", "sources", "bricks", "scale")}
+    return _canonical({**config["objects"]["size"], "seed": config["seed"]})
+
+
+def final_outputs():
+    """The default target: the final outputs of every implemented stage."""
+    return [
+        "results/objects/catalog.csv",
+        "results/objects/supports",
+        "results/figures/objects.png",
+    ]

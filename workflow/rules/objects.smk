@@ -1,0 +1,75 @@
+# The objects stage: select, validate, normalise and decompose every object; the catalog with the
+# split by object; the table and shelves; a picture of the objects.
+
+
+rule prepare_object:
+    input:
+        source=object_source,
+        code=code("assets"),
+    output:
+        directory("results/objects/{object}"),
+    params:
+        spec=object_spec,
+        size=object_size,
+        density=setting("objects", "density"),
+        decomposition=setting("objects", "decomposition"),
+        cache_dir=setting("cache_dir"),
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/objects/{object}.log",
+    benchmark:
+        "results/benchmarks/objects/{object}.tsv"
+    script:
+        "../scripts/prepare_object.py"
+
+
+checkpoint catalog:
+    input:
+        objects=object_dirs(),
+        code=code("assets"),
+    output:
+        "results/objects/catalog.csv",
+    params:
+        split=setting("objects", "split"),
+        seed=setting("seed"),
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/objects/catalog.log",
+    script:
+        "../scripts/catalog.py"
+
+
+rule supports:
+    input:
+        code=code("assets"),
+    output:
+        directory("results/objects/supports"),
+    params:
+        table=setting("objects", "supports", "table"),
+        shelves=setting("objects", "supports", "shelves"),
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/objects/supports.log",
+    script:
+        "../scripts/supports.py"
+
+
+rule objects_figure:
+    input:
+        catalog="results/objects/catalog.csv",
+        objects=object_dirs(),
+        code=code("viz"),
+    output:
+        report("results/figures/objects.png", caption="../report/objects.rst", category="Objects"),
+    params:
+        max_objects=setting("figures", "max_objects"),
+        seed=setting("seed"),
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/figures/objects.log",
+    script:
+        "../scripts/objects_figure.py"
