@@ -40,6 +40,7 @@ $(STAMP): pyproject.toml
 
 benchmark: $(STAMP)
 	$(PY) benchmarks/bench_objects.py
+	$(PY) benchmarks/bench_hand.py
 
 clean:
 	rm -rf results logs .snakemake

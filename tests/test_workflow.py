@@ -64,8 +64,11 @@ def test_smoke_run_outputs(smoke_run):
         splits = set(ok[ok.task_set == task_set].split)
         assert "train" in splits and "test" in splits, f"{task_set}: {splits}"
     assert (smoke_run / "results/objects/supports/supports.json").is_file()
-    png = smoke_run / "results/figures/objects.png"
-    assert png.is_file() and png.stat().st_size > 20_000
+    for png in ("objects.png", "hand.png"):
+        assert (smoke_run / "results/figures" / png).stat().st_size > 20_000
+    from tohgs.hand import HandAssets
+
+    assert HandAssets.load(smoke_run / "results/hand/hand.npz").name == cfg["hand"]["model"]
     assert (smoke_run / "logs/objects/catalog.log").read_text().strip()
 
 
@@ -90,7 +93,7 @@ def test_editing_assets_code_makes_exactly_the_objects_jobs_stale(smoke_run):
                                       "supports": 1}
     assert _snakemake(smoke_run).returncode == 0
     _edit(smoke_run / "tohgs/viz/render.py")
-    assert _stale_jobs(smoke_run) == {"all": 1, "objects_figure": 1}
+    assert _stale_jobs(smoke_run) == {"all": 1, "objects_figure": 1, "hand_figure": 1}
     assert _snakemake(smoke_run).returncode == 0
     assert _stale_jobs(smoke_run) == {}
 
@@ -118,5 +121,11 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
     assert stale_with(("objects.split.bricks", {"test": 0.5, "val": 0.0})) == {
         "all": 1, "catalog": 1, "objects_figure": 1}
     assert stale_with(("objects.supports.table", [1.2, 0.8, 0.05])) == {"all": 1, "supports": 1}
+    # A hand setting concerns the hand only (a MANO file needs a path that exists).
+    (smoke_run / "MANO_RIGHT.pkl").write_bytes(b"")
+    changed = yaml.safe_load(yaml.safe_dump(cfg))
+    changed["hand"] = {"model": "mano", "mano_path": "MANO_RIGHT.pkl"}
+    (smoke_run / "changed.yaml").write_text(yaml.safe_dump(changed))
+    assert _stale_jobs(smoke_run, configfile="changed.yaml") == {"all": 1, "hand_model": 1, "hand_figure": 1}
     # The dumps above sort the keys: the order of keys in a config file is not a change.
     assert stale_with(("seed", cfg["seed"])) == {}

@@ -72,6 +72,13 @@ def iter_schema_keys(schema: Mapping[str, Any], prefix: tuple[str, ...] = ()) ->
 
 def _semantic_checks(cfg: Mapping[str, Any], base_dir: Path) -> None:
     """Checks beyond the JSON schema: ordered ranges, existing paths, non-empty selections."""
+    hand = cfg["hand"]
+    if hand["model"] == "mano":
+        if hand["mano_path"] is None:
+            raise ConfigError("config key 'hand.mano_path': required when hand.model is 'mano'")
+        p = Path(hand["mano_path"])
+        if not (p if p.is_absolute() else base_dir / p).is_file():
+            raise ConfigError(f"config key 'hand.mano_path': file '{hand['mano_path']}' does not exist")
     obj = cfg["objects"]
     lo, hi = obj["size"]["longest_min"], obj["size"]["longest_max"]
     if lo > hi:

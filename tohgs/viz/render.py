@@ -25,17 +25,26 @@ def shade(normals: np.ndarray, color: str | tuple[float, float, float], ambient:
 
 
 def draw_mesh(ax, vertices: np.ndarray, faces: np.ndarray, color: str = "tab:blue", max_faces: int = 6000,
-              alpha: float = 1.0, rng: np.random.Generator | None = None) -> None:
-    """Draw a triangle mesh ((V, 3) metres, (F, 3) int) into a 3-D matplotlib axis."""
+              alpha: float = 1.0, rng: np.random.Generator | None = None,
+              face_colors: np.ndarray | None = None) -> None:
+    """Draw a triangle mesh ((V, 3) metres, (F, 3) int) into a 3-D matplotlib axis.
+
+    ``face_colors`` (F, 3) RGB in [0, 1], if given, replaces the uniform ``color`` (still shaded).
+    """
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces)
     if len(faces) > max_faces:
         rng = np.random.default_rng(0) if rng is None else rng
-        faces = faces[np.sort(rng.choice(len(faces), max_faces, replace=False))]
+        keep = np.sort(rng.choice(len(faces), max_faces, replace=False))
+        faces = faces[keep]
+        face_colors = None if face_colors is None else np.asarray(face_colors)[keep]
     tri = vertices[faces]
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     n /= np.linalg.norm(n, axis=1, keepdims=True) + 1e-12
     colors = shade(n, color)
+    if face_colors is not None:
+        lam = np.clip(n @ LIGHT, 0.0, 1.0)[:, None]
+        colors[:, :3] = np.clip(np.asarray(face_colors)[:, :3] * (0.35 + 0.65 * lam), 0, 1)
     colors[:, 3] = alpha
     coll = Poly3DCollection(tri, facecolors=colors, edgecolors="none", linewidths=0)
     ax.add_collection3d(coll)

@@ -76,4 +76,10 @@ def final_outputs():
         "results/objects/catalog.csv",
         "results/objects/supports",
         "results/figures/objects.png",
+        "results/figures/hand.png",
     ]
+
+
+def hand_source(wildcards):
+    """The user's MANO file when the mano backend is chosen (an input, so a new file reruns the hand)."""
+    return [config["hand"]["mano_path"]] if config["hand"]["model"] == "mano" else []

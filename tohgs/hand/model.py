@@ -1,0 +1,259 @@
+"""The hand model every backend shares: MANO-layout linear blend skinning in torch.
+
+A backend (``anny``, ``mano``) only produces :class:`HandAssets`, arrays in MANO's canonical frame; one
+:class:`HandModel` turns them into a batched, differentiable forward pass on any device:
+
+``forward(pose (B, 51), betas (B, 10) or None) -> HandOutput(vertices (B, V, 3), joints (B, 21, 3))``, metres.
+
+The kinematics are MANO's: rest joints with world-aligned frames; joint ``k``'s global transform is
+``G_k = G_parent(k) [R_k | J_k - J_parent(k)]`` with ``G_0 = [R_0 | J_0]`` (so the global rotation turns
+the hand about the rest wrist joint), vertices are skinned with ``sum_k w_vk G_k [I | -J_k]``, and the
+translation is added last (it moves every vertex by exactly itself).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from tohgs.hand.layout import N_BETAS, N_JOINTS, PARENTS, POSE_DIM
+from tohgs.hand.rotations import axis_angle_to_matrix
+
+#: Joints grouped by depth in the tree (wrist; first, second, third phalanges), for batched chaining.
+_LEVELS = ((0,), (1, 4, 7, 10, 13), (2, 5, 8, 11, 14), (3, 6, 9, 12, 15))
+
+
+@dataclass
+class HandAssets:
+    """Everything a backend provides, in MANO's canonical frame (metres, radians).
+
+    Attributes:
+        name: backend name (``anny`` or ``mano``).
+        rest_vertices: (V, 3) flat-hand vertices at zero betas.
+        shape_dirs: (V, 3, 10) vertex offsets per beta.
+        pose_dirs: (V, 3, 135) pose blend shapes on (R - I) of the 15 finger joints, or ``None``.
+        rest_joints: (16, 3) joint centres at zero betas.
+        joint_shape_dirs: (16, 3, 10) joint offsets per beta.
+        weights: (V, 16) skinning weights, rows sum to 1.
+        faces: (F, 3) triangles as the model has them (open at the wrist).
+        closed_faces: (F', 3) faces with the wrist sealed: a watertight closed surface.
+        part_labels: (V,) in [0, 16): the joint with the largest skinning weight.
+        tip_ids: (5,) fingertip vertex ids, in :data:`tohgs.hand.layout.TIP_ORDER`.
+        contact_ids: (C,) palm-side contact-candidate vertex ids.
+        joint_limits: (15, 3, 2) anatomical [min, max] per finger joint and canonical axis, radians.
+        prior_mean, prior_std: (45,) pose prior of the finger parameters.
+        presets: named (51,) pose vectors (``flat``, ``relaxed``, ``power``, ``pinch``).
+        meta: provenance (versions, shape mapping) for the record.
+    """
+
+    name: str
+    rest_vertices: np.ndarray
+    shape_dirs: np.ndarray
+    pose_dirs: np.ndarray | None
+    rest_joints: np.ndarray
+    joint_shape_dirs: np.ndarray
+    weights: np.ndarray
+    faces: np.ndarray
+    closed_faces: np.ndarray
+    part_labels: np.ndarray
+    tip_ids: np.ndarray
+    contact_ids: np.ndarray
+    joint_limits: np.ndarray
+    prior_mean: np.ndarray
+    prior_std: np.ndarray
+    presets: dict[str, np.ndarray] = field(default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def validate(self, source: str = "hand assets") -> None:
+        """Check shapes and basic invariants; raises ``ValueError`` naming ``source`` and the problem."""
+        v = len(self.rest_vertices)
+        expect = {
+            "rest_vertices": (v, 3), "shape_dirs": (v, 3, N_BETAS), "rest_joints": (N_JOINTS, 3),
+            "joint_shape_dirs": (N_JOINTS, 3, N_BETAS), "weights": (v, N_JOINTS), "part_labels": (v,),
+            "tip_ids": (5,), "joint_limits": (15, 3, 2), "prior_mean": (45,), "prior_std": (45,),
+        }
+        if self.pose_dirs is not None:
+            expect["pose_dirs"] = (v, 3, 135)
+        for key, shape in expect.items():
+            got = np.shape(getattr(self, key))
+            if got != shape:
+                raise ValueError(f"{source}: '{key}' has shape {got}, expected {shape}")
+        for key in ("faces", "closed_faces"):
+            f = np.asarray(getattr(self, key))
+            if f.ndim != 2 or f.shape[1] != 3 or f.min() < 0 or f.max() >= v:
+                raise ValueError(f"{source}: '{key}' must be (F, 3) vertex ids in [0, {v})")
+        if not np.allclose(self.weights.sum(1), 1.0, atol=1e-4):
+            raise ValueError(f"{source}: skinning weights do not sum to 1")
+        if not np.isfinite(self.rest_vertices).all():
+            raise ValueError(f"{source}: non-finite rest vertices")
+
+    def save(self, path: str | Path) -> None:
+        """Write to an ``.npz`` (atomically)."""
+        from tohgs.io import atomic_path
+
+        arrays: dict[str, Any] = {}
+        for f in fields(self):
+            val = getattr(self, f.name)
+            if f.name == "presets":
+                for k, p in val.items():
+                    arrays[f"preset__{k}"] = np.asarray(p)
+            elif f.name == "meta":
+                import json
+
+                arrays["meta_json"] = np.array(json.dumps(val))
+            elif val is not None:
+                arrays[f.name] = np.asarray(val)
+        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+
+    @staticmethod
+    def load(path: str | Path) -> "HandAssets":
+        """Read what :meth:`save` wrote; raises ``ValueError`` naming the file if it is not one."""
+        import json
+
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                data = {k: z[k] for k in z.files}
+        except Exception as exc:
+            raise ValueError(f"{path}: not a readable hand-assets file ({exc})") from exc
+        presets = {k.split("__", 1)[1]: v for k, v in data.items() if k.startswith("preset__")}
+        kwargs = {f.name: data.get(f.name) for f in fields(HandAssets) if f.name not in ("presets", "meta")}
+        missing = [k for k, v in kwargs.items() if v is None and k != "pose_dirs"]
+        if missing:
+            raise ValueError(f"{path}: hand-assets file lacks {missing}")
+        kwargs["name"] = str(kwargs["name"])
+        assets = HandAssets(**kwargs, presets=presets, meta=json.loads(str(data.get("meta_json", "{}"))))
+        assets.validate(str(path))
+        return assets
+
+
+@dataclass
+class HandOutput:
+    """Result of :meth:`HandModel.forward`.
+
+    Attributes:
+        vertices: (B, V, 3) metres.
+        joints: (B, 21, 3) metres: the 16 joints in MANO order, then the 5 fingertips
+            (thumb, index, middle, ring, pinky).
+    """
+
+    vertices: torch.Tensor
+    joints: torch.Tensor
+
+
+class HandModel(torch.nn.Module):
+    """MANO-layout hand: linear blend skinning over :class:`HandAssets`, batched and differentiable.
+
+    Buffers move with ``.to(device)``; computations run in the buffers' dtype (float32 by default).
+    """
+
+    def __init__(self, assets: HandAssets, dtype: torch.dtype = torch.float32) -> None:
+        super().__init__()
+        assets.validate(assets.name)
+        self.assets = assets
+        self.name = assets.name
+
+        def buf(name: str, x: np.ndarray, dt: torch.dtype = dtype) -> None:
+            self.register_buffer(name, torch.as_tensor(np.asarray(x), dtype=dt), persistent=False)
+
+        buf("rest_vertices", assets.rest_vertices)
+        buf("shape_dirs", assets.shape_dirs)
+        buf("rest_joints", assets.rest_joints)
+        buf("joint_shape_dirs", assets.joint_shape_dirs)
+        buf("weights", assets.weights)
+        if assets.pose_dirs is not None:
+            buf("pose_dirs", assets.pose_dirs.reshape(-1, 135).T)  # (135, V*3)
+        else:
+            self.pose_dirs = None
+        buf("faces", assets.faces, torch.long)
+        buf("closed_faces", assets.closed_faces, torch.long)
+        buf("part_labels", assets.part_labels, torch.long)
+        buf("tip_ids", assets.tip_ids, torch.long)
+        buf("contact_ids", assets.contact_ids, torch.long)
+        buf("joint_limits", assets.joint_limits)
+        buf("prior_mean", assets.prior_mean)
+        buf("prior_std", assets.prior_std)
+        self.register_buffer("parents", torch.as_tensor(PARENTS, dtype=torch.long), persistent=False)
+        # Fast path when every hand of a batch has the same rest shape (no betas, no pose blend shapes):
+        # skinning becomes one GEMM, vertices[v] = sum_{k, j} (w_vk [v_rest | 1]_j) A_k[:, j].
+        vh = torch.cat([self.rest_vertices, torch.ones_like(self.rest_vertices[:, :1])], 1)  # (V, 4)
+        self.register_buffer("skin_rest", (self.weights[:, :, None] * vh[:, None, :]).reshape(-1, 4 * N_JOINTS),
+                             persistent=False)
+
+    @property
+    def n_vertices(self) -> int:
+        return int(self.rest_vertices.shape[0])
+
+    def preset(self, name: str, batch: int = 1) -> torch.Tensor:
+        """A named pose preset as a (batch, 51) tensor on the model's device."""
+        if name not in self.assets.presets:
+            raise KeyError(f"unknown pose preset '{name}'; known: {sorted(self.assets.presets)}")
+        p = torch.as_tensor(self.assets.presets[name], dtype=self.rest_vertices.dtype, device=self.rest_vertices.device)
+        return p.expand(batch, POSE_DIM).clone()
+
+    def shaped(self, betas: torch.Tensor | None, batch: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """Rest vertices (B, V, 3) and joints (B, 16, 3) for ``betas`` (B, 10) (``None`` = zeros)."""
+        if betas is None:
+            return (self.rest_vertices.expand(batch, -1, -1), self.rest_joints.expand(batch, -1, -1))
+        if betas.shape != (batch, N_BETAS):
+            raise ValueError(f"betas must have shape ({batch}, {N_BETAS}), got {tuple(betas.shape)}")
+        v = self.rest_vertices + torch.einsum("vcl,bl->bvc", self.shape_dirs, betas)
+        j = self.rest_joints + torch.einsum("jcl,bl->bjc", self.joint_shape_dirs, betas)
+        return v, j
+
+    def forward(self, pose: torch.Tensor, betas: torch.Tensor | None = None) -> HandOutput:
+        """Pose the hand.
+
+        Args:
+            pose: (B, 51) grasp vectors: translation (3, m), global axis-angle (3, about the rest wrist
+                joint), 15 finger joints x axis-angle (3) in MANO joint order, canonical-frame axes.
+            betas: (B, 10) shape parameters, or ``None`` for the average hand.
+
+        Returns:
+            :class:`HandOutput` with vertices (B, V, 3) and joints (B, 21, 3), metres.
+        """
+        if pose.ndim != 2 or pose.shape[1] != POSE_DIM:
+            raise ValueError(f"pose must have shape (B, {POSE_DIM}), got {tuple(pose.shape)}")
+        pose = pose.to(self.rest_vertices.dtype)
+        b = pose.shape[0]
+        v_rest, j_rest = self.shaped(betas, b)
+        rot = axis_angle_to_matrix(pose[:, 3:].reshape(b, N_JOINTS, 3))  # (B, 16, 3, 3)
+        if self.pose_dirs is not None:
+            eye = torch.eye(3, dtype=rot.dtype, device=rot.device)
+            feat = (rot[:, 1:] - eye).reshape(b, 135)
+            v_rest = v_rest + (feat @ self.pose_dirs).reshape(b, -1, 3)
+
+        # Global rotations and joint positions, one tree level at a time.
+        g_rot = [None] * N_JOINTS
+        g_pos = [None] * N_JOINTS
+        g_rot[0], g_pos[0] = rot[:, 0], j_rest[:, 0]
+        for level in _LEVELS[1:]:
+            ks = list(level)
+            ps = [PARENTS[k] for k in ks]
+            pr = torch.stack([g_rot[p] for p in ps], 1)  # (B, 5, 3, 3)
+            pp = torch.stack([g_pos[p] for p in ps], 1)  # (B, 5, 3)
+            offset = j_rest[:, ks] - j_rest[:, ps]  # (B, 5, 3)
+            r = pr @ rot[:, ks]
+            pos = pp + (pr @ offset[..., None])[..., 0]
+            for i, k in enumerate(ks):
+                g_rot[k], g_pos[k] = r[:, i], pos[:, i]
+        R = torch.stack(g_rot, 1)  # (B, 16, 3, 3)
+        P = torch.stack(g_pos, 1)  # (B, 16, 3)
+        # Skinning transforms [R | P - R J_rest], blended per vertex.
+        t = P - (R @ j_rest[..., None])[..., 0]
+        A = torch.cat([R, t[..., None]], -1)  # (B, 16, 3, 4)
+        if betas is None and self.pose_dirs is None:
+            a2 = A.permute(1, 3, 0, 2).reshape(4 * N_JOINTS, b * 3)  # (64, B*3)
+            verts = (self.skin_rest @ a2).reshape(-1, b, 3).transpose(0, 1)  # (B, V, 3)
+        else:
+            T = torch.matmul(self.weights, A.reshape(b, N_JOINTS, 12)).reshape(b, -1, 3, 4)  # (B, V, 3, 4)
+            verts = (T[..., :3] * v_rest[:, :, None, :]).sum(-1) + T[..., 3]
+        trans = pose[:, None, :3]
+        verts = verts + trans
+        tips = verts[:, self.tip_ids]
+        joints = torch.cat([P + trans, tips], 1)
+        return HandOutput(vertices=verts, joints=joints)
