@@ -6,6 +6,7 @@ or change settings never touch the repository's own results.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shutil
@@ -69,6 +70,15 @@ def test_smoke_run_outputs(smoke_run):
     from tohgs.hand import HandAssets
 
     assert HandAssets.load(smoke_run / "results/hand/hand.npz").name == cfg["hand"]["model"]
+    from tohgs.data.scenes import read_scenes
+
+    for task in cfg["scenes"]["tasks"]:
+        stores = sorted((smoke_run / "results/scenes" / task).glob("*.zarr"))
+        n_set = len(ok[ok.task_set == ("stacking" if task == "stacking" else "placing/shelving")])
+        assert len(stores) == n_set
+        for st in stores:
+            assert len(read_scenes(st)) == cfg["scenes"]["n_configs"]
+        assert (smoke_run / f"results/figures/scenes_{task}.png").stat().st_size > 20_000
     assert (smoke_run / "logs/objects/catalog.log").read_text().strip()
 
 
@@ -76,25 +86,42 @@ def test_nothing_to_do_after_a_finished_run(smoke_run):
     assert _stale_jobs(smoke_run) == {}
 
 
-def _edit(path: Path) -> None:
+@contextlib.contextmanager
+def _edited(path: Path):
+    """An edit of a source file for the duration of the block; restoring the content undoes the change
+    (Snakemake compares the checksums of small inputs, so nothing needs to rerun afterwards)."""
+    original = path.read_text()
     time.sleep(1.0)
-    with open(path, "a") as fh:
-        fh.write("# an edit\n")
+    path.write_text(original + "# an edit\n")
+    try:
+        yield
+    finally:
+        path.write_text(original)
 
 
-def test_editing_assets_code_makes_exactly_the_objects_jobs_stale(smoke_run):
+def _n_scenes(smoke_run) -> int:
+    return len(list((smoke_run / "results/scenes").glob("*/*.zarr")))
+
+
+def test_editing_code_makes_exactly_its_stage_stale(smoke_run):
+    """Objects code: the objects jobs (and what is built from them); figure code: the figures; simulation
+    code: the scenes. Never the hand unless its code changes. A touch without a change is no change."""
     n_objects = len(pd.read_csv(smoke_run / "results/objects/catalog.csv"))
-    # Snakemake compares the checksums of small inputs: a touch without a change of content is no change.
+    n_scenes = _n_scenes(smoke_run)
     time.sleep(1.0)
     os.utime(smoke_run / "tohgs/assets/mesh.py")
     assert _stale_jobs(smoke_run) == {}
-    _edit(smoke_run / "tohgs/assets/mesh.py")
-    assert _stale_jobs(smoke_run) == {"all": 1, "prepare_object": n_objects, "catalog": 1, "objects_figure": 1,
-                                      "supports": 1}
-    assert _snakemake(smoke_run).returncode == 0
-    _edit(smoke_run / "tohgs/viz/render.py")
-    assert _stale_jobs(smoke_run) == {"all": 1, "objects_figure": 1, "hand_figure": 1}
-    assert _snakemake(smoke_run).returncode == 0
+    # The catalog is a checkpoint: a dry run lists the jobs up to it and those whose outputs are fixed
+    # targets (the figures); the scene stores after it are decided once it has run.
+    with _edited(smoke_run / "tohgs/assets/mesh.py"):
+        assert _stale_jobs(smoke_run) == {"all": 1, "prepare_object": n_objects, "catalog": 1, "objects_figure": 1,
+                                          "supports": 1, "scenes_figure": 3}
+    with _edited(smoke_run / "tohgs/viz/render.py"):
+        assert _stale_jobs(smoke_run) == {"all": 1, "objects_figure": 1, "hand_figure": 1, "scenes_figure": 3}
+    with _edited(smoke_run / "tohgs/sim/world.py"):
+        assert _stale_jobs(smoke_run) == {"all": 1, "scenes": n_scenes, "scenes_figure": 3}
+    with _edited(smoke_run / "tohgs/hand/model.py"):
+        assert _stale_jobs(smoke_run) == {"all": 1, "hand_model": 1, "hand_figure": 1}
     assert _stale_jobs(smoke_run) == {}
 
 
@@ -102,6 +129,7 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
     cfg = yaml.safe_load((smoke_run / ".test/config/config.yaml").read_text())
     n_bricks = cfg["objects"]["sources"]["bricks"]["count"]
     n_objects = len(pd.read_csv(smoke_run / "results/objects/catalog.csv"))
+    n_stacking = len(list((smoke_run / "results/scenes/stacking").glob("*.zarr")))
 
     def stale_with(patch) -> dict[str, int]:
         changed = yaml.safe_load(yaml.safe_dump(cfg))
@@ -113,14 +141,18 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
         (smoke_run / "changed.yaml").write_text(yaml.safe_dump(changed))
         return _stale_jobs(smoke_run, configfile="changed.yaml")
 
-    # The brick scale concerns the bricks only; the density every object; the split only the catalog.
+    # The brick scale concerns the bricks only (and the scenes, which load every object); the density
+    # every object; the split only the catalog; a stacking setting only the stacking scenes.
     assert stale_with(("objects.sources.bricks.scale", 1.1)) == {
-        "all": 1, "prepare_object": n_bricks, "catalog": 1, "objects_figure": 1}
+        "all": 1, "prepare_object": n_bricks, "catalog": 1, "objects_figure": 1, "scenes_figure": 3}
     assert stale_with(("objects.density", 650.0)) == {
-        "all": 1, "prepare_object": n_objects, "catalog": 1, "objects_figure": 1}
+        "all": 1, "prepare_object": n_objects, "catalog": 1, "objects_figure": 1, "scenes_figure": 3}
     assert stale_with(("objects.split.bricks", {"test": 0.5, "val": 0.0})) == {
-        "all": 1, "catalog": 1, "objects_figure": 1}
-    assert stale_with(("objects.supports.table", [1.2, 0.8, 0.05])) == {"all": 1, "supports": 1}
+        "all": 1, "catalog": 1, "objects_figure": 1, "scenes_figure": 3}
+    assert stale_with(("objects.supports.table", [1.2, 0.8, 0.05])) == {
+        "all": 1, "supports": 1, "scenes": _n_scenes(smoke_run), "scenes_figure": 3}
+    stacking = dict(cfg["scenes"]["stacking"], max_offset=0.005)
+    assert stale_with(("scenes.stacking", stacking)) == {"all": 1, "scenes": n_stacking, "scenes_figure": 1}
     # A hand setting concerns the hand only (a MANO file needs a path that exists).
     (smoke_run / "MANO_RIGHT.pkl").write_bytes(b"")
     changed = yaml.safe_load(yaml.safe_dump(cfg))

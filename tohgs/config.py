@@ -86,6 +86,14 @@ def _semantic_checks(cfg: Mapping[str, Any], base_dir: Path) -> None:
     tmin, tmax = obj["size"]["thickness_min"], obj["size"]["thickness_max"]
     if tmin > tmax:
         raise ConfigError(f"config key 'objects.size.thickness_min': {tmin} is larger than objects.size.thickness_max = {tmax}")
+    sc = cfg["scenes"]
+    for key in ("placing", "shelving"):
+        for pair in ("obstacles", "obstacle_gap"):
+            lo_, hi_ = sc[key][pair]
+            if lo_ > hi_:
+                raise ConfigError(f"config key 'scenes.{key}.{pair}': [min, max] = [{lo_}, {hi_}] is not ordered")
+    if sc["stacking"]["min_goal_distance"] > sc["stacking"]["max_goal_distance"]:
+        raise ConfigError("config key 'scenes.stacking.min_goal_distance': larger than scenes.stacking.max_goal_distance")
     src = obj["sources"]
     dir_path = src["dir"]["path"]
     if dir_path is not None:

@@ -70,14 +70,48 @@ def object_size(wildcards):
     return _canonical({**config["objects"]["size"], "seed": config["seed"]})
 
 
+def accepted_objects(task):
+    """Accepted objects of a task's set (bricks for stacking), read from the catalog checkpoint."""
+    import pandas as pd
+
+    catalog = pd.read_csv(checkpoints.catalog.get().output[0], keep_default_na=False)
+    task_set = "stacking" if task == "stacking" else "placing/shelving"
+    return sorted(catalog[(catalog.status == "ok") & (catalog.task_set == task_set)].name)
+
+
+def scene_stores_of(task):
+    """Every scene store of ``task``."""
+    return expand("results/scenes/{task}/{object}.zarr", task=task, object=accepted_objects(task))
+
+
+def scene_stores(wildcards):
+    return scene_stores_of(wildcards.task)
+
+
+def scene_pool(wildcards):
+    """Obstacles (Placing, Shelving) or base bricks (Stacking) to draw from: the task set's accepted objects."""
+    return accepted_objects(wildcards.task)
+
+
+def scene_settings(wildcards):
+    """The scenes settings one task uses (so another task's settings do not make it stale)."""
+    keys = ("n_configs", "max_tries", "allow_fewer", "physics", "contact_margin", wildcards.task)
+    return _canonical({k: config["scenes"][k] for k in keys})
+
+
 def final_outputs():
-    """The default target: the final outputs of every implemented stage."""
+    """The default target's outputs known before the catalog exists (see catalog_outputs)."""
     return [
         "results/objects/catalog.csv",
         "results/objects/supports",
         "results/figures/objects.png",
         "results/figures/hand.png",
-    ]
+    ] + [f"results/figures/scenes_{task}.png" for task in config["scenes"]["tasks"]]
+
+
+def catalog_outputs(wildcards):
+    """The default target's outputs per accepted object, known once the catalog checkpoint has run."""
+    return [store for task in config["scenes"]["tasks"] for store in scene_stores_of(task)]
 
 
 def hand_source(wildcards):

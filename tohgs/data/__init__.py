@@ -1,0 +1,1 @@
+"""The Zarr stores of tohgs: schemas, writers and validating readers."""

@@ -1,0 +1,1 @@
+"""Simulation: PyBullet worlds, the task scenes (Placing, Stacking, Shelving), crash isolation."""
