@@ -41,6 +41,7 @@ $(STAMP): pyproject.toml
 benchmark: $(STAMP)
 	$(PY) benchmarks/bench_objects.py
 	$(PY) benchmarks/bench_hand.py
+	$(PY) benchmarks/bench_metrics.py
 
 clean:
 	rm -rf results logs .snakemake

@@ -70,11 +70,12 @@ def test_smoke_run_outputs(smoke_run):
     from tohgs.hand import HandAssets
 
     assert HandAssets.load(smoke_run / "results/hand/hand.npz").name == cfg["hand"]["model"]
+    from tohgs.assets.sources import task_set
     from tohgs.data.scenes import read_scenes
 
     for task in cfg["scenes"]["tasks"]:
         stores = sorted((smoke_run / "results/scenes" / task).glob("*.zarr"))
-        n_set = len(ok[ok.task_set == ("stacking" if task == "stacking" else "placing/shelving")])
+        n_set = len(ok[ok.task_set == task_set(task)])
         assert len(stores) == n_set
         for st in stores:
             assert len(read_scenes(st)) == cfg["scenes"]["n_configs"]

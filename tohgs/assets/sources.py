@@ -27,6 +27,15 @@ from tohgs.assets.mesh import MESH_SUFFIXES
 TASK_SET_OBJECTS = "placing/shelving"
 TASK_SET_BRICKS = "stacking"
 
+
+
+def task_set(task: str) -> str:
+    """The object set a task draws its targets from: the bricks for stacking, the objects otherwise."""
+    if task not in ("placing", "stacking", "shelving"):
+        raise ValueError(f"unknown task '{task}'")
+    return TASK_SET_BRICKS if task == "stacking" else TASK_SET_OBJECTS
+
+
 #: Named household meshes of pybullet_data that are candidates (paths relative to its data folder).
 #: Some do not pass validation (for example the mug, open at its rim): they are recorded as rejected.
 PYBULLET_NAMED = (

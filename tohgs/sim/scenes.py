@@ -65,10 +65,12 @@ class ObjectAsset:
         return float(Rotation.from_quat(quat).apply(self.vertices)[:, 2].min())
 
     def highest(self, quat: np.ndarray) -> float:
+        """The highest z of the mesh turned by ``quat`` (xyzw), relative to its origin."""
         return float(Rotation.from_quat(quat).apply(self.vertices)[:, 2].max())
 
 
 def load_object_asset(objects_dir: str | Path, name: str) -> ObjectAsset:
+    """Read object ``name`` of the objects stage (``<objects_dir>/<name>/mesh.obj`` and ``object.urdf``)."""
     d = Path(objects_dir) / name
     mesh = trimesh.load(d / "mesh.obj", force="mesh", process=False)
     return ObjectAsset(name, d / "object.urdf", np.asarray(mesh.vertices, dtype=np.float64))

@@ -8,7 +8,8 @@ if str(REPO) not in sys.path:  # parse time only; jobs import the installed pack
     sys.path.insert(0, str(REPO))
 
 from tohgs.config import ConfigError, validate_config
-from tohgs.assets.sources import select_objects
+from tohgs.assets.objects import read_catalog
+from tohgs.assets.sources import select_objects, task_set
 
 try:
     validate_config(config)
@@ -72,11 +73,8 @@ def object_size(wildcards):
 
 def accepted_objects(task):
     """Accepted objects of a task's set (bricks for stacking), read from the catalog checkpoint."""
-    import pandas as pd
-
-    catalog = pd.read_csv(checkpoints.catalog.get().output[0], keep_default_na=False)
-    task_set = "stacking" if task == "stacking" else "placing/shelving"
-    return sorted(catalog[(catalog.status == "ok") & (catalog.task_set == task_set)].name)
+    catalog = read_catalog(checkpoints.catalog.get().output[0])
+    return sorted(catalog[catalog.task_set == task_set(task)].name)
 
 
 def scene_stores_of(task):

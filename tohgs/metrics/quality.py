@@ -1,0 +1,172 @@
+"""Grasp quality metrics of the evaluation protocol, written once and reused by every stage.
+
+- PV, penetration volume: the object at its pose voxelised at a 1 mm pitch (surface voxels, as trimesh's
+  ``voxelized`` returns them); the voxel centres inside the closed hand mesh are counted, times the voxel
+  volume. m^3 (tables report cm^3).
+- SD, simulation displacement: PyBullet, the hand a static concave triangle mesh (mass 0, friction 3,
+  restitution 0); the object its convex decomposition, mass 1, friction 3, restitution 0.5, its inertial
+  frame at the mesh's vertex mean; time step 1/240 s, 150 solver iterations, 35 steps (the official
+  code's setting, not the paper's "1 s"); SD is how far the object's centre moved, m; a failed simulation
+  counts 0.10 m. Gravity is a setting: the official code applies it along +y of its camera-derived frame;
+  tohgs's prior grasps live in the object's frame with z up (the frame the object rests in on the table),
+  so the default is -z, the direction the object will be held against.
+- Contact: PV > 0, and separately the smallest signed distance from the hand's vertices to the object's
+  surface (negative inside), m.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+VOXEL_PITCH = 0.001  # m
+
+
+def surface_voxels(mesh: trimesh.Trimesh, pitch: float = VOXEL_PITCH) -> np.ndarray:
+    """(N, 3) centres of the surface voxels of ``mesh`` at ``pitch`` (metres, the mesh's frame)."""
+    return np.asarray(mesh.voxelized(pitch).points, dtype=np.float64)
+
+
+def _occupancy(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N,) bool: which points lie inside the closed mesh (open3d's ray-casting occupancy)."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(vertices, dtype=np.float32)),
+                        o3d.core.Tensor(np.ascontiguousarray(faces, dtype=np.uint32)))
+    return scene.compute_occupancy(o3d.core.Tensor(np.ascontiguousarray(points, dtype=np.float32))).numpy() > 0.5
+
+
+def penetration_volume(hand_vertices: np.ndarray, hand_faces: np.ndarray, voxels: np.ndarray,
+                       pitch: float = VOXEL_PITCH) -> np.ndarray:
+    """PV of each hand: object surface voxels inside the closed hand mesh times the voxel volume.
+
+    Args:
+        hand_vertices: (B, V, 3) or (V, 3) hand vertices, metres, in the frame of ``voxels``.
+        hand_faces: (F, 3) the hand's closed (watertight) faces.
+        voxels: (N, 3) the object's surface voxel centres (:func:`surface_voxels`) at its pose.
+        pitch: voxel size, m.
+
+    Returns:
+        (B,) penetration volumes, m^3 (a scalar array for a single hand).
+    """
+    hv = np.asarray(hand_vertices, dtype=np.float64)
+    single = hv.ndim == 2
+    hv = hv[None] if single else hv
+    out = np.zeros(len(hv))
+    for b, v in enumerate(hv):
+        lo, hi = v.min(0) - pitch, v.max(0) + pitch
+        near = voxels[np.all((voxels >= lo) & (voxels <= hi), axis=1)]
+        if len(near):
+            out[b] = _occupancy(v, hand_faces, near).sum() * pitch**3
+    return out[0] if single else out
+
+
+def contact_distance(hand_vertices: np.ndarray, object_mesh: trimesh.Trimesh) -> np.ndarray:
+    """Smallest signed distance from the hand's vertices to the object's surface (negative inside), m.
+
+    Args:
+        hand_vertices: (B, V, 3) or (V, 3), metres, in the object mesh's frame.
+        object_mesh: the watertight object.
+
+    Returns:
+        (B,) distances (a scalar array for a single hand).
+    """
+    import open3d as o3d
+
+    hv = np.asarray(hand_vertices, dtype=np.float32)
+    single = hv.ndim == 2
+    hv = hv[None] if single else hv
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(object_mesh.vertices, dtype=np.float32)),
+                        o3d.core.Tensor(np.asarray(object_mesh.faces, dtype=np.uint32)))
+    d = scene.compute_signed_distance(o3d.core.Tensor(hv.reshape(-1, 3))).numpy().reshape(hv.shape[:2])
+    out = d.min(1).astype(np.float64)
+    return out[0] if single else out
+
+
+@dataclass(frozen=True)
+class SDSettings:
+    """The simulation-displacement protocol (SI units); defaults are the official evaluation code's."""
+
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.8)
+    time_step: float = 1.0 / 240.0
+    solver_iterations: int = 150
+    steps: int = 35
+    hand_friction: float = 3.0
+    object_friction: float = 3.0
+    object_mass: float = 1.0
+    object_restitution: float = 0.5
+    failed_displacement: float = 0.10
+
+
+@dataclass
+class DisplacementSimulator:
+    """SD for many hands on one object: the object's collision parts are loaded once per world reset.
+
+    Args:
+        collision_obj: the object's convex decomposition (``collision.obj`` of the objects stage), in the
+            object's mesh frame.
+        vertex_mean: (3,) the object's mesh vertex mean in that frame, m: its inertial frame for SD.
+        settings: the protocol.
+    """
+
+    collision_obj: str | Path
+    vertex_mean: np.ndarray
+    settings: SDSettings = field(default_factory=SDSettings)
+
+    def __post_init__(self) -> None:
+        import pybullet as pb
+
+        self._pb = pb
+        self.cid = pb.connect(pb.DIRECT)
+
+    def close(self) -> None:
+        if self.cid is not None and self._pb.isConnected(self.cid):
+            self._pb.disconnect(self.cid)
+        self.cid = None
+
+    def __enter__(self) -> "DisplacementSimulator":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def displacement(self, hand_vertices: np.ndarray, hand_faces: np.ndarray,
+                     object_pose: np.ndarray | None = None) -> float:
+        """SD of one hand, m.
+
+        Args:
+            hand_vertices: (V, 3) metres, world frame.
+            hand_faces: (F, 3) hand triangles.
+            object_pose: the object's mesh-frame pose ``[x, y, z, qx, qy, qz, qw]`` (default: identity).
+        """
+        pb, s, cid = self._pb, self.settings, self.cid
+        try:
+            pb.resetSimulation(physicsClientId=cid)
+            pb.setGravity(*s.gravity, physicsClientId=cid)
+            pb.setTimeStep(s.time_step, physicsClientId=cid)
+            pb.setPhysicsEngineParameter(numSolverIterations=s.solver_iterations, physicsClientId=cid)
+            hand_col = pb.createCollisionShape(pb.GEOM_MESH, vertices=np.asarray(hand_vertices, dtype=np.float64).tolist(),
+                                               indices=np.asarray(hand_faces, dtype=np.int64).ravel().tolist(),
+                                               flags=pb.GEOM_FORCE_CONCAVE_TRIMESH, physicsClientId=cid)
+            hand = pb.createMultiBody(0, hand_col, physicsClientId=cid)
+            pb.changeDynamics(hand, -1, lateralFriction=s.hand_friction, restitution=0.0, physicsClientId=cid)
+            pos, orn = (np.zeros(3), np.array([0, 0, 0, 1.0])) if object_pose is None else (object_pose[:3], object_pose[3:])
+            obj_col = pb.createCollisionShape(pb.GEOM_MESH, fileName=str(self.collision_obj), physicsClientId=cid)
+            obj = pb.createMultiBody(s.object_mass, obj_col, basePosition=pos.tolist(), baseOrientation=orn.tolist(),
+                                     baseInertialFramePosition=np.asarray(self.vertex_mean, dtype=np.float64).tolist(),
+                                     physicsClientId=cid)
+            pb.changeDynamics(obj, -1, lateralFriction=s.object_friction, restitution=s.object_restitution,
+                              physicsClientId=cid)
+            start = np.asarray(pb.getBasePositionAndOrientation(obj, physicsClientId=cid)[0])
+            for _ in range(s.steps):
+                pb.stepSimulation(physicsClientId=cid)
+            end = np.asarray(pb.getBasePositionAndOrientation(obj, physicsClientId=cid)[0])
+            d = float(np.linalg.norm(end - start))
+            return d if np.isfinite(d) else s.failed_displacement
+        except pb.error:
+            return s.failed_displacement
