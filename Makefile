@@ -42,6 +42,7 @@ benchmark: $(STAMP)
 	$(PY) benchmarks/bench_objects.py
 	$(PY) benchmarks/bench_hand.py
 	$(PY) benchmarks/bench_metrics.py
+	$(PY) benchmarks/bench_sdf.py
 
 clean:
 	rm -rf results logs .snakemake

@@ -1,0 +1,60 @@
+"""Force-closure grasp synthesis: the energy terms and the annealing optimiser."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from tohgs.assets.bricks import make_brick
+from tohgs.geometry.sdf import SDFGrid
+from tohgs.grasps.synthesis import GraspEnergy, SynthesisSettings, initial_grasps, synthesize, wrench_energy
+from tohgs.hand import load_hand
+
+
+@pytest.fixture(scope="module")
+def setup():
+    hand = load_hand("anny")
+    cube = make_brick("cube")
+    cube.apply_translation(-cube.center_mass)
+    return hand, cube, SDFGrid.build(cube, spacing=0.002, padding=0.05)
+
+
+def test_wrench_energy_known_cases():
+    x = torch.tensor([[[0.02, 0, 0], [-0.02, 0, 0]]])
+    balanced = torch.tensor([[[1.0, 0, 0], [-1.0, 0, 0]]])
+    assert wrench_energy(x, balanced).item() == pytest.approx(0.0)
+    single = torch.tensor([[[1.0, 0, 0], [1.0, 0, 0]]])
+    assert wrench_energy(x, single).item() == pytest.approx(4.0)  # |2 n|^2, no torque (x parallel to n)
+    twist = torch.tensor([[[0, 1.0, 0], [0, -1.0, 0]]])  # a couple: no net force, torque 2 * 0.02
+    assert wrench_energy(x, twist).item() == pytest.approx((2 * 0.02) ** 2)
+
+
+def test_initial_hands_face_the_object_from_outside(setup):
+    hand, cube, sdf = setup
+    s = SynthesisSettings(batch=16, init_jitter=0.0)
+    pose, contact = initial_grasps(hand, cube.vertices, s, torch.Generator().manual_seed(0))
+    assert pose.shape == (16, 51) and contact.shape == (16, s.n_contact)
+    with torch.no_grad():
+        v = hand(pose).vertices
+    palm = v[:, hand.contact_ids[-8:]].mean(1)
+    d = sdf(palm)
+    assert (d > 0).all() and (d < 0.04 + 0.03).all()  # outside, within the initial distance (plus the cube's corners)
+    # The palm normal (the hand's -y turned by the global rotation) points at the object.
+    from tohgs.hand.rotations import axis_angle_to_matrix
+
+    palm_normal = axis_angle_to_matrix(pose[:, 3:6]) @ torch.tensor([0.0, -1.0, 0.0])
+    toward = -palm / palm.norm(dim=-1, keepdim=True)
+    assert ((palm_normal * toward).sum(-1) > 0.9).all()
+
+
+def test_the_optimiser_lowers_the_energy(setup):
+    hand, cube, sdf = setup
+    s = SynthesisSettings(batch=8, iterations=60)
+    r = synthesize(hand, sdf, cube.vertices, s, seed=0)
+    assert len(r.history) == 61
+    assert r.history[-1] < 0.6 * r.history[0], r.history[::10]
+    e0 = GraspEnergy(hand, sdf, s)(*initial_grasps(hand, cube.vertices, s, torch.Generator().manual_seed(0)))
+    assert r.energies.dis.mean() < e0.dis.mean().detach()
+    again = synthesize(hand, sdf, cube.vertices, s, seed=0)
+    assert torch.equal(again.pose, r.pose), "the same seed must give the same grasps"

@@ -1,0 +1,1 @@
+"""Geometry: signed distances, sampling, inside tests, transforms."""

@@ -1,0 +1,1 @@
+"""Grasps: force-closure synthesis (prior grasps), the quality filter, task expansion."""
