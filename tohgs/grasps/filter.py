@@ -1,0 +1,70 @@
+"""The prior-grasp quality filter: thresholds on the metrics, the joint limits and the optimiser energies.
+
+It replaces the paper's manual removal of non-human-like grasps with the anatomical joint limits. A
+grasp passes if every check passes:
+
+- ``pv``: penetration volume below ``max_pv`` (4 cm^3 = 4e-6 m^3, the paper's "4e-6 cm^3" being a unit slip);
+- ``sd``: simulation displacement below ``max_sd`` (3 cm);
+- ``contact``: the hand within ``max_contact_distance`` (5 mm) of the object (GraspTTA's dataset filter);
+- ``joints``: every finger parameter within the hand's anatomical limits (plus ``joint_tolerance``);
+- ``energy``: DexGraspNet's success thresholds, E_fc < 0.3, E_dis < 0.005 m, E_pen < 0.001 m.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+CHECKS = ("pv", "sd", "contact", "joints", "energy")
+
+
+@dataclass(frozen=True)
+class FilterThresholds:
+    """Thresholds of the filter (SI units)."""
+
+    max_pv: float = 4e-6
+    max_sd: float = 0.03
+    max_contact_distance: float = 0.005
+    joint_tolerance: float = 0.0
+    max_fc: float = 0.3
+    max_dis: float = 0.005
+    max_pen: float = 0.001
+
+
+def quality_flags(pv: np.ndarray, sd: np.ndarray, contact_distance: np.ndarray, finger_pose: np.ndarray,
+                  joint_limits: np.ndarray, e_fc: np.ndarray, e_dis: np.ndarray, e_pen: np.ndarray,
+                  t: FilterThresholds) -> dict[str, np.ndarray]:
+    """Pass flags of each check and overall.
+
+    Args:
+        pv: (B,) penetration volumes, m^3.
+        sd: (B,) simulation displacements, m.
+        contact_distance: (B,) smallest signed hand-object distance, m.
+        finger_pose: (B, 45) finger parameters (the grasp vector's last 45 numbers), radians.
+        joint_limits: (15, 3, 2) the hand's limits per joint and axis, radians.
+        e_fc, e_dis, e_pen: (B,) the optimiser's final energies.
+        t: the thresholds.
+
+    Returns:
+        ``{"pv", "sd", "contact", "joints", "energy", "passed"}``, each (B,) bool.
+    """
+    lim = np.asarray(joint_limits).reshape(45, 2)
+    fp = np.asarray(finger_pose).reshape(-1, 45)
+    flags = {
+        "pv": np.asarray(pv) < t.max_pv,
+        "sd": np.asarray(sd) < t.max_sd,
+        "contact": np.asarray(contact_distance) <= t.max_contact_distance,
+        "joints": np.all((fp >= lim[:, 0] - t.joint_tolerance) & (fp <= lim[:, 1] + t.joint_tolerance), axis=1),
+        "energy": (np.asarray(e_fc) < t.max_fc) & (np.asarray(e_dis) < t.max_dis) & (np.asarray(e_pen) < t.max_pen),
+    }
+    flags["passed"] = np.logical_and.reduce([flags[c] for c in CHECKS])
+    return flags
+
+
+def rejection_counts(flags: dict[str, np.ndarray]) -> dict[str, int]:
+    """How many grasps fail each check (a grasp can fail several), and how many pass."""
+    out = Counter({c: int((~flags[c]).sum()) for c in CHECKS})
+    out["passed"] = int(flags["passed"].sum())
+    return dict(out)
