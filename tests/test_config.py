@@ -9,7 +9,7 @@ import sys
 import pytest
 import yaml
 
-from tohgs.config import ConfigError, iter_schema_keys, load_schema, validate_config
+from tohgs.config import ConfigError, _deep_update, iter_schema_keys, load_schema, validate_config
 
 
 def test_every_schema_key_has_description_and_default():
@@ -58,7 +58,7 @@ def test_defaults_are_filled_in_place():
 )
 def test_invalid_config_names_key_and_problem(default_config, patch, key, problem):
     cfg = copy.deepcopy(default_config)
-    _merge(cfg, patch)
+    _deep_update(cfg, patch)
     with pytest.raises(ConfigError) as exc:
         validate_config(cfg)
     msg = str(exc.value)
@@ -76,10 +76,3 @@ def test_invalid_config_stops_the_workflow_before_any_job(repo, tmp_path):
     assert "config key 'seed'" in out.stderr + out.stdout and "out of range" in out.stderr + out.stdout
     assert not (tmp_path / "results").exists(), "a job ran despite the invalid config"
 
-
-def _merge(dst, src):
-    for k, v in src.items():
-        if isinstance(v, dict) and isinstance(dst.get(k), dict):
-            _merge(dst[k], v)
-        else:
-            dst[k] = v

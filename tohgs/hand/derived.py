@@ -152,21 +152,23 @@ def complete_assets(a: HandAssets) -> HandAssets:
     a.tip_ids = np.asarray(tips, dtype=np.int64)
     # Contact candidates: palm-side vertices of each part, spread by farthest point sampling.
     palm_side = normals @ PALM_NORMAL > np.cos(np.deg2rad(50))
+
+    def spread(idx: np.ndarray, count: int, where: str) -> list[int]:
+        if len(idx) < count:
+            raise ValueError(f"{a.name}: only {len(idx)} palm-side vertices on {where}")
+        start = np.argmin(np.linalg.norm(v[idx] - v[idx].mean(0), axis=1))
+        return idx[_fps(v[idx], count, int(start))].tolist()
+
     contact = []
     for finger, ks in FINGERS.items():
         for k, count in zip(ks, CONTACT_COUNTS[finger]):
-            idx = np.flatnonzero(palm_side & (a.part_labels == k))
-            if len(idx) < count:
-                raise ValueError(f"{a.name}: only {len(idx)} palm-side vertices on joint {k}")
-            start = np.argmin(np.linalg.norm(v[idx] - v[idx].mean(0), axis=1))
-            contact += idx[_fps(v[idx], count, int(start))].tolist()
+            contact += spread(np.flatnonzero(palm_side & (a.part_labels == k)), count, f"joint {k}")
     # Palm: between the wrist and the knuckles, away from the wrist opening.
     knuckles = j[[1, 4, 7, 10]]
     along = knuckles.mean(0) - j[0]
     t = (v - j[0]) @ along / (along @ along)
-    idx = np.flatnonzero(palm_side & (a.part_labels == 0) & (t > 0.25) & (t < 0.95))
-    start = np.argmin(np.linalg.norm(v[idx] - v[idx].mean(0), axis=1))
-    contact += idx[_fps(v[idx], CONTACT_COUNTS["palm"], int(start))].tolist()
+    contact += spread(np.flatnonzero(palm_side & (a.part_labels == 0) & (t > 0.25) & (t < 0.95)),
+                      CONTACT_COUNTS["palm"], "the palm")
     a.contact_ids = np.asarray(contact, dtype=np.int64)
     # Joint limits, presets and the pose prior.
     frames = joint_frames(j)

@@ -177,7 +177,6 @@ class HandModel(torch.nn.Module):
         buf("joint_limits", assets.joint_limits)
         buf("prior_mean", assets.prior_mean)
         buf("prior_std", assets.prior_std)
-        self.register_buffer("parents", torch.as_tensor(PARENTS, dtype=torch.long), persistent=False)
         # Fast path when every hand of a batch has the same rest shape (no betas, no pose blend shapes):
         # skinning becomes one GEMM, vertices[v] = sum_{k, j} (w_vk [v_rest | 1]_j) A_k[:, j].
         vh = torch.cat([self.rest_vertices, torch.ones_like(self.rest_vertices[:, :1])], 1)  # (V, 4)

@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from tohgs.geometry.sdf import exact_signed_distance, raycasting_scene
+
 VOXEL_PITCH = 0.001  # m
 
 
@@ -34,10 +36,7 @@ def _occupancy(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> n
     """(N,) bool: which points lie inside the closed mesh (open3d's ray-casting occupancy)."""
     import open3d as o3d
 
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(vertices, dtype=np.float32)),
-                        o3d.core.Tensor(np.ascontiguousarray(faces, dtype=np.uint32)))
-    return scene.compute_occupancy(o3d.core.Tensor(np.ascontiguousarray(points, dtype=np.float32))).numpy() > 0.5
+    return raycasting_scene(vertices, faces).compute_occupancy(o3d.core.Tensor(np.ascontiguousarray(points, dtype=np.float32))).numpy() > 0.5
 
 
 def penetration_volume(hand_vertices: np.ndarray, hand_faces: np.ndarray, voxels: np.ndarray,
@@ -75,16 +74,11 @@ def contact_distance(hand_vertices: np.ndarray, object_mesh: trimesh.Trimesh) ->
     Returns:
         (B,) distances (a scalar array for a single hand).
     """
-    import open3d as o3d
-
-    hv = np.asarray(hand_vertices, dtype=np.float32)
+    hv = np.asarray(hand_vertices, dtype=np.float64)
     single = hv.ndim == 2
     hv = hv[None] if single else hv
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.asarray(object_mesh.vertices, dtype=np.float32)),
-                        o3d.core.Tensor(np.asarray(object_mesh.faces, dtype=np.uint32)))
-    d = scene.compute_signed_distance(o3d.core.Tensor(hv.reshape(-1, 3))).numpy().reshape(hv.shape[:2])
-    out = d.min(1).astype(np.float64)
+    d = exact_signed_distance(object_mesh, hv.reshape(-1, 3)).reshape(hv.shape[:2])
+    out = d.min(1)
     return out[0] if single else out
 
 

@@ -10,8 +10,7 @@ import numpy as np
 import torch
 
 from tohgs.hand.model import HandModel
-from tohgs.io import atomic_path
-from tohgs.viz.render import draw_mesh, set_equal
+from tohgs.viz.render import draw_mesh, save_figure, set_equal
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +53,5 @@ def plot_hand(hand: HandModel, out_png: str | Path) -> None:
     fig.suptitle(f"hand '{hand.name}' in MANO's canonical frame (fingers -x, palm -y, thumb +z); "
                  f"{hand.n_vertices} vertices, {len(hand.assets.contact_ids)} contact candidates", fontsize=9)
     fig.subplots_adjust(left=0, right=1, bottom=0, top=0.9, wspace=0, hspace=0.08)
-    with atomic_path(out_png) as tmp:
-        fig.savefig(tmp, dpi=90, format="png")
-    plt.close(fig)
+    save_figure(fig, out_png)
     log.info("wrote %s", out_png)

@@ -10,8 +10,7 @@ import numpy as np
 import trimesh
 
 from tohgs.assets.objects import read_catalog
-from tohgs.io import atomic_path
-from tohgs.viz.render import draw_mesh, set_equal
+from tohgs.viz.render import draw_mesh, save_figure, set_equal
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +50,5 @@ def plot_objects(catalog_csv: str | Path, out_png: str | Path, max_objects: int 
     legend = f"colour = split: train blue, val green, test orange; every panel spans {200 * radius:.0f} cm"
     fig.text(0.01, 0.005, "\n".join([legend] + lines), fontsize=7, va="bottom", family="monospace")
     fig.tight_layout(rect=(0, 0.03 + 0.012 * len(lines), 1, 1))
-    with atomic_path(out_png) as tmp:
-        fig.savefig(tmp, dpi=90, format="png")
-    plt.close(fig)
+    save_figure(fig, out_png)
     log.info("wrote %s: %d objects, %d rejected listed", out_png, len(shown), len(rejected))

@@ -9,6 +9,9 @@ import matplotlib
 
 matplotlib.use("Agg")
 
+from pathlib import Path  # noqa: E402
+
+import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.colors import to_rgb  # noqa: E402
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: E402
@@ -60,3 +63,12 @@ def set_equal(ax, points: np.ndarray, pad: float = 0.05, radius: float | None = 
     ax.set_zlim(c[2] - r, c[2] + r)
     ax.set_box_aspect((1, 1, 1))
     ax.set_axis_off()
+
+
+def save_figure(fig, out_png: str | Path, dpi: int = 90) -> None:
+    """Write ``fig`` as a PNG atomically and close it."""
+    from tohgs.io import atomic_path
+
+    with atomic_path(out_png) as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png")
+    plt.close(fig)

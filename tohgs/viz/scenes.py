@@ -13,9 +13,9 @@ import numpy as np  # noqa: E402
 
 from tohgs.assets.supports import read_supports  # noqa: E402
 from tohgs.data.scenes import read_scenes  # noqa: E402
-from tohgs.io import atomic_path  # noqa: E402
 from tohgs.sim.scenes import load_configuration  # noqa: E402
 from tohgs.sim.world import World  # noqa: E402
+from tohgs.viz.render import save_figure  # noqa: E402
 
 log = logging.getLogger(__name__)
 
@@ -64,7 +64,5 @@ def plot_scenes(scene_paths: list[str | Path], objects_dir: str | Path, supports
                 axes[row, col].set_title(f"{s.object} #{c} {which}{extra}", fontsize=8)
     fig.suptitle(f"{task}: target red, obstacles blue, base green (initial | goal)", fontsize=9)
     fig.tight_layout()
-    with atomic_path(out_png) as tmp:
-        fig.savefig(tmp, dpi=90, format="png")
-    plt.close(fig)
+    save_figure(fig, out_png)
     log.info("wrote %s (%d configurations)", out_png, len(picks))
