@@ -43,6 +43,8 @@ benchmark: $(STAMP)
 	$(PY) benchmarks/bench_hand.py
 	$(PY) benchmarks/bench_metrics.py
 	$(PY) benchmarks/bench_sdf.py
+	$(PY) benchmarks/bench_prior.py
+	$(PY) benchmarks/bench_maps.py
 
 clean:
 	rm -rf results logs .snakemake

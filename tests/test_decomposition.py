@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import trimesh
 
 from tohgs.assets.bricks import make_brick
 from tohgs.assets.decomposition import DecompositionSettings, cache_key, convex_decomposition
@@ -41,3 +42,13 @@ def test_cache_key_changes_with_settings_and_geometry():
     assert k == cache_key(m, FAST)
     assert k != cache_key(m, DecompositionSettings(**{**FAST.__dict__, "threshold": 0.3}))
     assert k != cache_key(make_brick("l-shape", scale=1.1), FAST)
+
+
+def test_hull_vertex_cap_keeps_a_close_inner_hull():
+    from tohgs.assets.decomposition import cap_hull_vertices
+
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.05)  # 2562 vertices
+    capped = cap_hull_vertices(sphere, 64)
+    assert len(capped.vertices) <= 64 and capped.is_convex
+    assert 0.8 * sphere.volume < capped.volume <= sphere.volume + 1e-12
+    assert cap_hull_vertices(capped, 64) is capped  # already small enough: unchanged

@@ -83,3 +83,10 @@ def test_gravity_direction_is_a_setting(cube):
         assert sim.displacement(floor.vertices, floor.faces) < 0.002
     with DisplacementSimulator(path, mesh.vertices.mean(0), SDSettings(gravity=(9.8, 0.0, 0.0))) as sim:
         assert sim.displacement(floor.vertices, floor.faces) > 0.05
+
+
+def test_palm_gravity_points_from_the_palm_through_the_object():
+    from tohgs.metrics.quality import palm_gravity
+
+    g = palm_gravity(np.array([[0.0, 0.0, 0.1], [0.05, 0.0, 0.0]]), np.zeros(3))
+    np.testing.assert_allclose(g, [[0, 0, -9.8], [-9.8, 0, 0]])

@@ -8,7 +8,8 @@ import torch
 
 from tohgs.assets.bricks import make_brick
 from tohgs.geometry.sdf import SDFGrid
-from tohgs.grasps.synthesis import GraspEnergy, SynthesisSettings, initial_grasps, synthesize, wrench_energy
+from tohgs.grasps.synthesis import (GraspEnergy, SynthesisSettings, initial_grasps, support_planes, synthesize,
+                                    wrench_energy)
 from tohgs.hand import load_hand
 
 
@@ -50,11 +51,37 @@ def test_initial_hands_face_the_object_from_outside(setup):
 
 def test_the_optimiser_lowers_the_energy(setup):
     hand, cube, sdf = setup
-    s = SynthesisSettings(batch=8, iterations=60)
+    s = SynthesisSettings(batch=8, iterations=60, refine_iterations=20)
     r = synthesize(hand, sdf, cube.vertices, s, seed=0)
-    assert len(r.history) == 61
+    assert len(r.history) == 81
     assert r.history[-1] < 0.6 * r.history[0], r.history[::10]
+    polish = r.history[60:]
+    assert all(b <= a + 1e-6 for a, b in zip(polish, polish[1:])), "refinement keeps each grasp's best pose"
     e0 = GraspEnergy(hand, sdf, s)(*initial_grasps(hand, cube.vertices, s, torch.Generator().manual_seed(0)))
     assert r.energies.dis.mean() < e0.dis.mean().detach()
     again = synthesize(hand, sdf, cube.vertices, s, seed=0)
     assert torch.equal(again.pose, r.pose), "the same seed must give the same grasps"
+
+
+def test_support_planes_touch_the_object_and_the_plane_energy_pushes_hands_out(setup):
+    hand, cube, sdf = setup
+    for direction in ("random", "down"):
+        s = SynthesisSettings(batch=8, plane_fraction=0.5, plane_direction=direction)
+        planes = support_planes(cube.vertices, s, torch.Generator().manual_seed(1))
+        assert (planes[4:] == 0).all() and (planes[:4, :3].norm(dim=-1) - 1).abs().max() < 1e-6
+        side = torch.as_tensor(cube.vertices, dtype=torch.float32) @ planes[:4, :3].T - planes[:4, 3]
+        assert side.min() > -1e-6 and side.min(0).values.abs().max() < 1e-6  # tangent: touches, no cut
+        if direction == "down":
+            assert torch.allclose(planes[:4, :3], torch.tensor([0.0, 0.0, 1.0]).expand(4, 3))
+    s = SynthesisSettings(batch=2, plane_fraction=1.0, plane_direction="down")
+    planes = support_planes(cube.vertices, s, torch.Generator().manual_seed(0))
+    pose, contact = initial_grasps(hand, cube.vertices, s, torch.Generator().manual_seed(0), planes)
+    energy = GraspEnergy(hand, sdf, s, planes)
+    with torch.no_grad():
+        floor = planes[0, 3].item()
+        lowest = hand(pose).vertices[..., 2].min(1).values
+        above, below = pose.clone(), pose.clone()
+        above[:, 2] += floor + 0.01 - lowest
+        below[:, 2] += floor - 0.02 - lowest
+        assert (energy(above, contact).plane == 0).all()
+        assert (energy(below, contact).plane > 0).all()

@@ -81,6 +81,49 @@ def test_smoke_run_outputs(smoke_run):
             assert len(read_scenes(st)) == cfg["scenes"]["n_configs"]
         assert (smoke_run / f"results/figures/scenes_{task}.png").stat().st_size > 20_000
     assert (smoke_run / "logs/objects/catalog.log").read_text().strip()
+    from tohgs.data.grasps import read_prior_grasps
+
+    summary = pd.read_csv(smoke_run / "results/grasps/prior/summary.csv")
+    assert sorted(summary.object) == sorted(ok.name)
+    for name in ok.name:
+        raw = read_prior_grasps(smoke_run / f"results/grasps/prior/raw/{name}.zarr", filtered=False)
+        kept = read_prior_grasps(smoke_run / f"results/grasps/prior/{name}.zarr", filtered=True)
+        assert len(raw) == len(kept) == cfg["prior_grasps"]["synthesis"]["batch"]
+        assert (raw.pose == kept.pose).all() and (kept.sd >= 0).all() and (kept.pv >= 0).all()
+        assert summary.set_index("object").accepted[name] == kept.passed.sum()
+    assert (smoke_run / "results/figures/prior_grasps.png").stat().st_size > 20_000
+    from tohgs.data.maps import read_map_shard
+    from tohgs.data.task_grasps import read_task_grasps
+
+    n_task = 0
+    for task in cfg["scenes"]["tasks"]:
+        for st in sorted((smoke_run / "results/grasps/task" / task).glob("*.zarr")):
+            arrays, attrs = read_task_grasps(st)
+            assert attrs["task"] == task and len(arrays["kept_per_config"]) == cfg["scenes"]["n_configs"]
+            n_task += len(arrays["config"])
+        configs = 0
+        for split, n in cfg["maps"]["shards"].items():
+            for k in range(n):
+                sh = read_map_shard(smoke_run / f"results/maps/{task}/{split}/shard-{k}.zarr")
+                assert sh.attrs["split"] == split and sh.points.shape[1:] == (cfg["maps"]["points"]["n_points"], 3)
+                configs += sh.n_configs
+        assert configs > 0
+    assert n_task > 0, "the smoke run expands some task grasps"
+    summary = pd.read_csv(smoke_run / "results/maps/summary.csv")
+    assert summary[summary.split == "task_grasps"].grasps.sum() == n_task
+    assert (smoke_run / "results/figures/maps.png").stat().st_size > 20_000
+    import torch
+
+    from tohgs.data.predictions import read_predictions
+
+    for task in cfg["scenes"]["tasks"]:
+        for model in ("contact_diffuser", "grasp_diffuser"):
+            ckpt = torch.load(smoke_run / f"results/models/{task}/{model}.pt", weights_only=False)
+            assert ckpt["loss_curve"][-1]["step"] == cfg["training"][model]["steps"]
+            assert (smoke_run / f"results/models/{task}/{model}.png").is_file()
+        for method in cfg["prediction"]["methods"]:
+            arrays, attrs = read_predictions(smoke_run / f"results/predictions/{task}/{method}.zarr")
+            assert arrays["grasp_init"].shape[1] == cfg["prediction"]["samples"] and attrs["method"] == method
 
 
 def test_nothing_to_do_after_a_finished_run(smoke_run):
@@ -104,11 +147,31 @@ def _n_scenes(smoke_run) -> int:
     return len(list((smoke_run / "results/scenes").glob("*/*.zarr")))
 
 
+N_MAPS = 9  # 3 tasks x (1 train + 1 val + 1 test) shards in the smoke config
+MODELS = {"train": 6, "predict": 6}  # 3 tasks x 2 models; 3 tasks x 2 methods (ours, ours-gt-contact)
+DATASET = {"maps": N_MAPS, "dataset_summary": 1, "maps_figure": 1, **MODELS}
+# Jobs with fixed output names behind the catalog checkpoint: listed in a dry run before it reruns.
+AFTER_CATALOG = {"prior_summary": 1, "prior_figure": 1, **DATASET}
+
+
+def _n_task_grasps(smoke_run) -> int:
+    return len(list((smoke_run / "results/grasps/task").glob("*/*.zarr")))
+
+
+def _prior(n: int, n_task: int, synthesis: bool = True) -> dict[str, int]:
+    """The prior-grasp jobs of ``n`` objects (synthesis optional, filter, summary, figure) and everything
+    built from them: ``n_task`` task-grasp jobs, the map shards, their summary and figure."""
+    return {**({"prior_synthesis": n} if synthesis else {}), "prior_filter": n, "task_grasps": n_task,
+            **AFTER_CATALOG}
+
+
 def test_editing_code_makes_exactly_its_stage_stale(smoke_run):
     """Objects code: the objects jobs (and what is built from them); figure code: the figures; simulation
     code: the scenes. Never the hand unless its code changes. A touch without a change is no change."""
     n_objects = len(pd.read_csv(smoke_run / "results/objects/catalog.csv"))
     n_scenes = _n_scenes(smoke_run)
+    n_prior = len(list((smoke_run / "results/grasps/prior").glob("*.zarr")))
+    n_task = _n_task_grasps(smoke_run)
     time.sleep(1.0)
     os.utime(smoke_run / "tohgs/assets/mesh.py")
     assert _stale_jobs(smoke_run) == {}
@@ -116,13 +179,21 @@ def test_editing_code_makes_exactly_its_stage_stale(smoke_run):
     # targets (the figures); the scene stores after it are decided once it has run.
     with _edited(smoke_run / "tohgs/assets/mesh.py"):
         assert _stale_jobs(smoke_run) == {"all": 1, "prepare_object": n_objects, "catalog": 1, "objects_figure": 1,
-                                          "supports": 1, "scenes_figure": 3}
+                                          "supports": 1, "scenes_figure": 3, **AFTER_CATALOG}
     with _edited(smoke_run / "tohgs/viz/render.py"):
-        assert _stale_jobs(smoke_run) == {"all": 1, "objects_figure": 1, "hand_figure": 1, "scenes_figure": 3}
+        assert _stale_jobs(smoke_run) == {"all": 1, "objects_figure": 1, "hand_figure": 1, "scenes_figure": 3,
+                                          "prior_figure": 1, "maps_figure": 1}
     with _edited(smoke_run / "tohgs/sim/world.py"):
-        assert _stale_jobs(smoke_run) == {"all": 1, "scenes": n_scenes, "scenes_figure": 3}
+        assert _stale_jobs(smoke_run) == {"all": 1, "scenes": n_scenes, "scenes_figure": 3, "task_grasps": n_task,
+                                          **DATASET}
+    with _edited(smoke_run / "tohgs/geometry/maps.py"):
+        assert _stale_jobs(smoke_run) == {"all": 1, **DATASET}
     with _edited(smoke_run / "tohgs/hand/model.py"):
-        assert _stale_jobs(smoke_run) == {"all": 1, "hand_model": 1, "hand_figure": 1}
+        assert _stale_jobs(smoke_run) == {"all": 1, "hand_model": 1, "hand_figure": 1, **_prior(n_prior, n_task)}
+    with _edited(smoke_run / "tohgs/grasps/synthesis.py"):
+        assert _stale_jobs(smoke_run) == {"all": 1, **_prior(n_prior, n_task)}
+    with _edited(smoke_run / "tohgs/grasps/filter.py"):
+        assert _stale_jobs(smoke_run) == {"all": 1, **_prior(n_prior, n_task, synthesis=False)}
     assert _stale_jobs(smoke_run) == {}
 
 
@@ -145,20 +216,39 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
     # The brick scale concerns the bricks only (and the scenes, which load every object); the density
     # every object; the split only the catalog; a stacking setting only the stacking scenes.
     assert stale_with(("objects.sources.bricks.scale", 1.1)) == {
-        "all": 1, "prepare_object": n_bricks, "catalog": 1, "objects_figure": 1, "scenes_figure": 3}
+        "all": 1, "prepare_object": n_bricks, "catalog": 1, "objects_figure": 1, "scenes_figure": 3, **AFTER_CATALOG}
     assert stale_with(("objects.density", 650.0)) == {
-        "all": 1, "prepare_object": n_objects, "catalog": 1, "objects_figure": 1, "scenes_figure": 3}
+        "all": 1, "prepare_object": n_objects, "catalog": 1, "objects_figure": 1, "scenes_figure": 3, **AFTER_CATALOG}
     assert stale_with(("objects.split.bricks", {"test": 0.5, "val": 0.0})) == {
-        "all": 1, "catalog": 1, "objects_figure": 1, "scenes_figure": 3}
+        "all": 1, "catalog": 1, "objects_figure": 1, "scenes_figure": 3, **AFTER_CATALOG}
+    n_task = _n_task_grasps(smoke_run)
     assert stale_with(("objects.supports.table", [1.2, 0.8, 0.05])) == {
-        "all": 1, "supports": 1, "scenes": _n_scenes(smoke_run), "scenes_figure": 3}
+        "all": 1, "supports": 1, "scenes": _n_scenes(smoke_run), "scenes_figure": 3, "task_grasps": n_task, **DATASET}
     stacking = dict(cfg["scenes"]["stacking"], max_offset=0.005)
-    assert stale_with(("scenes.stacking", stacking)) == {"all": 1, "scenes": n_stacking, "scenes_figure": 1}
+    assert stale_with(("scenes.stacking", stacking)) == {"all": 1, "scenes": n_stacking, "scenes_figure": 1,
+                                                         "task_grasps": n_stacking, "maps": 3, "dataset_summary": 1,
+                                                         "maps_figure": 1, "train": 2, "predict": 2}
     # A hand setting concerns the hand only (a MANO file needs a path that exists).
     (smoke_run / "MANO_RIGHT.pkl").write_bytes(b"")
     changed = yaml.safe_load(yaml.safe_dump(cfg))
     changed["hand"] = {"model": "mano", "mano_path": "MANO_RIGHT.pkl"}
     (smoke_run / "changed.yaml").write_text(yaml.safe_dump(changed))
-    assert _stale_jobs(smoke_run, configfile="changed.yaml") == {"all": 1, "hand_model": 1, "hand_figure": 1}
+    n_prior = len(list((smoke_run / "results/grasps/prior").glob("*.zarr")))
+    n_task = _n_task_grasps(smoke_run)
+    assert _stale_jobs(smoke_run, configfile="changed.yaml") == {"all": 1, "hand_model": 1, "hand_figure": 1,
+                                                                  **_prior(n_prior, n_task)}
+    # A filter threshold reruns only the filter (and what reads it); a synthesis setting the synthesis.
+    assert stale_with(("prior_grasps.filter", dict(cfg["prior_grasps"]["filter"], max_sd=0.02))) == {
+        "all": 1, **_prior(n_prior, n_task, synthesis=False)}
+    assert stale_with(("prior_grasps.synthesis", dict(cfg["prior_grasps"]["synthesis"], w_prior=0.4))) == {
+        "all": 1, **_prior(n_prior, n_task)}
+    # The expansion tolerance: the task grasps and the maps; a map size: the maps only.
+    assert stale_with(("task_grasps.tolerance", 0.003)) == {"all": 1, "task_grasps": n_task, **DATASET}
+    assert stale_with(("maps.points", dict(cfg["maps"]["points"], n_points=96))) == {"all": 1, **DATASET}
+    # A ContactDiffuser size: its three trainings and the predictions that sample from it (not ours-gt-contact);
+    # a sampling setting: the predictions only.
+    contact = dict(cfg["models"]["contact_diffuser"], d_model=24)
+    assert stale_with(("models.contact_diffuser", contact)) == {"all": 1, "train": 3, "predict": 3}
+    assert stale_with(("prediction", dict(cfg["prediction"], steps=4))) == {"all": 1, "predict": 6}
     # The dumps above sort the keys: the order of keys in a config file is not a change.
     assert stale_with(("seed", cfg["seed"])) == {}

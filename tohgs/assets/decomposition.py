@@ -37,6 +37,8 @@ class DecompositionSettings:
         convex_tolerance: a mesh whose volume is at least (1 - tolerance) x its hull's volume is treated
             as convex and decomposed into its hull alone.
         seed: CoACD's random seed.
+        max_hull_vertices: most vertices per part; a part with more is replaced by the hull of a
+            farthest-point subset of its vertices (Bullet's convex contacts cost grows with vertices).
     """
 
     threshold: float = 0.1
@@ -48,6 +50,21 @@ class DecompositionSettings:
     mcts_nodes: int = 10
     convex_tolerance: float = 0.01
     seed: int = 0
+    max_hull_vertices: int = 64
+
+
+def cap_hull_vertices(part: trimesh.Trimesh, k: int) -> trimesh.Trimesh:
+    """The convex hull of at most ``k`` of ``part``'s vertices, chosen by farthest-point sampling from
+    the vertex farthest from the centroid (deterministic; the result lies inside the original hull)."""
+    v = np.asarray(part.vertices, dtype=np.float64)
+    if len(v) <= k:
+        return part
+    chosen = [int(np.argmax(((v - v.mean(0)) ** 2).sum(1)))]
+    d = ((v - v[chosen[0]]) ** 2).sum(1)
+    for _ in range(k - 1):
+        chosen.append(int(np.argmax(d)))
+        d = np.minimum(d, ((v - v[chosen[-1]]) ** 2).sum(1))
+    return trimesh.Trimesh(v[chosen]).convex_hull
 
 
 def _coacd_version() -> str:
@@ -114,6 +131,12 @@ def convex_decomposition(mesh: trimesh.Trimesh, settings: DecompositionSettings,
         ``(parts, method)``: convex hulls (each a ``Trimesh``) and how they were made:
         ``"hull"`` (convex mesh), ``"coacd"`` or ``"coacd-cached"``.
     """
+    parts, method = _decompose(mesh, settings, cache_dir)
+    return [cap_hull_vertices(p, settings.max_hull_vertices) for p in parts], method
+
+
+def _decompose(mesh: trimesh.Trimesh, settings: DecompositionSettings,
+               cache_dir: str | Path | None) -> tuple[list[trimesh.Trimesh], str]:
     hull = mesh.convex_hull
     if mesh.volume >= (1.0 - settings.convex_tolerance) * hull.volume:
         return [hull], "hull"

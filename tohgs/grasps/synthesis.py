@@ -15,12 +15,19 @@ Energy per grasp (weights from DexGraspNet-MANO, all settings in :class:`Synthes
 - ``E_spen``: self-penetration, the hinge ``relu(thr - d)`` over pairs of distal keypoints of different
   fingers (DexGraspNet's MANO branch has a sign bug here; this is the intended hinge).
 - ``E_joint``: violation of the anatomical joint limits (sum of hinge distances, radians).
-- ``E_plane``: hand vertices below a support plane ``n . v < offset`` (sum of depths), so that grasps
-  can be kept on the free side of a table; off unless a plane is given.
+- ``E_plane``: hand vertices beyond a support plane ``n . v < offset`` (sum of depths), so that grasps
+  stay on the free side of a table. A fraction ``plane_fraction`` of the batch gets a plane tangent to the
+  object's far side along a random direction (``"random"``: objects, which rest in any orientation) or
+  under it (``"down"``: bricks, which rest upright); the others have none.
+
+Contact normals are the SDF's central differences at the contact points, so they are differentiable in the
+points' positions (treating them as constants, as a first version here did, left E_fc barely moving).
 
 The optimiser is DexGraspNet's annealing (not Langevin): an RMSProp-normalised gradient step on the pose,
 each contact index resampled with probability ``switch_probability``, and a Metropolis accept/reject
-per grasp with a temperature that decays geometrically.
+per grasp with a temperature that decays geometrically. DexGraspNet anneals for 6000 iterations; a CPU
+budget of a few hundred needs the same schedule compressed (decays every few steps), followed by a
+polishing phase with the contacts fixed (:func:`_refine`).
 """
 
 from __future__ import annotations
@@ -39,8 +46,8 @@ from tohgs.hand.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 
 @dataclass(frozen=True)
 class SynthesisSettings:
-    """Grasp synthesis settings (SI units). Defaults follow DexGraspNet-MANO except the budget and the
-    initial distance, which are small for CPU runs (see the config)."""
+    """Grasp synthesis settings (SI units). Weights follow DexGraspNet-MANO; the budget, the schedule's
+    decay intervals and the initial distance are set for CPU runs (see the config)."""
 
     batch: int = 64
     iterations: int = 300
@@ -54,16 +61,19 @@ class SynthesisSettings:
     spen_threshold: float = 0.018
     step_size: float = 0.005
     step_decay: float = 0.95
-    step_decay_every: int = 50
+    step_decay_every: int = 8
     rmsprop_mu: float = 0.98
-    switch_probability: float = 0.5
+    switch_probability: float = 0.1
     temperature: float = 18.0
     temperature_decay: float = 0.95
-    temperature_decay_every: int = 30
+    temperature_decay_every: int = 2
+    refine_iterations: int = 200
+    refine_lr: float = 0.001
     init_distance: tuple[float, float] = (0.01, 0.04)
     init_jitter: float = 0.1
     init_preset: str = "relaxed"
-    plane: tuple[float, float, float, float] | None = None  # (nx, ny, nz, offset): keep n . v >= offset
+    plane_fraction: float = 0.0
+    plane_direction: str = "random"  # or "down"
 
 
 @dataclass
@@ -86,10 +96,12 @@ class Energies:
 @dataclass
 class SynthesisResult:
     """Optimised grasps of one object: ``pose`` (B, 51), ``contact_idx`` (B, n) into the hand's
-    contact candidates, the final :class:`Energies`, and the mean total energy per iteration."""
+    contact candidates, ``planes`` (B, 4) the support planes (zero rows: none), the final
+    :class:`Energies`, and the mean total energy per iteration."""
 
     pose: torch.Tensor
     contact_idx: torch.Tensor
+    planes: torch.Tensor
     energies: Energies
     history: list[float] = field(default_factory=list)
 
@@ -122,13 +134,25 @@ def _distal_keypoints() -> list[tuple[int, str]]:
 class GraspEnergy:
     """The energy of grasps on one object (its SDF grid), for one hand model."""
 
-    def __init__(self, hand: HandModel, sdf: SDFGrid, settings: SynthesisSettings):
+    def __init__(self, hand: HandModel, sdf: SDFGrid, settings: SynthesisSettings,
+                 planes: torch.Tensor | None = None):
+        """``planes``: optional (B, 4) support planes ``[nx, ny, nz, offset]`` (keep ``n . v >= offset``);
+        a row with a zero normal means no plane for that grasp."""
         self.hand, self.sdf, self.s = hand, sdf, settings
+        self.planes = planes
         kp = _distal_keypoints()
         self.kp_idx = torch.tensor([k for k, _ in kp])
         fingers = [f for _, f in kp]
         pairs = [(i, j) for i in range(len(kp)) for j in range(i + 1, len(kp)) if fingers[i] != fingers[j]]
         self.pairs = torch.tensor(pairs)
+
+    def normals(self, x: torch.Tensor) -> torch.Tensor:
+        """Outward unit normals of the SDF at (B, n, 3) points by central differences (differentiable in x)."""
+        h = self.sdf.spacing
+        offsets = h * torch.eye(3, dtype=x.dtype, device=x.device)
+        d = self.sdf(torch.stack([x[..., None, :] + offsets, x[..., None, :] - offsets], -3))  # (B, n, 2, 3)
+        grad = (d[..., 0, :] - d[..., 1, :]) / (2 * h)
+        return grad / grad.norm(dim=-1, keepdim=True).clamp_min(1e-9)
 
     def __call__(self, pose: torch.Tensor, contact_idx: torch.Tensor) -> Energies:
         """Energies of (B, 51) poses with (B, n) contact indices."""
@@ -138,11 +162,7 @@ class GraspEnergy:
         b = pose.shape[0]
         cid = hand.contact_ids[contact_idx]  # (B, n) vertex ids
         x = torch.gather(verts, 1, cid[..., None].expand(-1, -1, 3))  # (B, n, 3)
-        with torch.enable_grad():
-            xd = x.detach().requires_grad_(True)
-            d = self.sdf(xd)
-            (grad,) = torch.autograd.grad(d.sum(), xd)
-        normal = grad / grad.norm(dim=-1, keepdim=True).clamp_min(1e-9)  # outward; fixed per step
+        normal = self.normals(x)
         e_fc = wrench_energy(x, normal)
         e_dis = self.sdf(x).abs().sum(-1)
         e_pen = torch.relu(-self.sdf(verts)).sum(-1)
@@ -153,9 +173,10 @@ class GraspEnergy:
         e_spen = torch.relu(s.spen_threshold - dist).sum(-1)
         lim = hand.joint_limits.reshape(45, 2)
         e_joint = (torch.relu(fingers - lim[:, 1]) + torch.relu(lim[:, 0] - fingers)).sum(-1)
-        if s.plane is not None:
-            n = torch.tensor(s.plane[:3], dtype=verts.dtype)
-            e_plane = torch.relu(s.plane[3] - verts @ n).sum(-1)
+        if self.planes is not None:
+            n, offset = self.planes[:, None, :3].to(verts.dtype), self.planes[:, 3:4].to(verts.dtype)
+            has = (n.norm(dim=-1) > 0).to(verts.dtype)  # (B, 1)
+            e_plane = (torch.relu(offset - (verts * n).sum(-1)) * has).sum(-1)
         else:
             e_plane = torch.zeros(b, dtype=verts.dtype)
         total = (e_fc + s.w_dis * e_dis + s.w_pen * e_pen + s.w_prior * e_prior + s.w_spen * e_spen
@@ -163,13 +184,34 @@ class GraspEnergy:
         return Energies(total, e_fc, e_dis, e_pen, e_prior, e_spen, e_joint, e_plane)
 
 
-def initial_grasps(hand: HandModel, vertices: np.ndarray, settings: SynthesisSettings, generator: torch.Generator
-                   ) -> tuple[torch.Tensor, torch.Tensor]:
+def support_planes(vertices: np.ndarray, settings: SynthesisSettings, generator: torch.Generator) -> torch.Tensor:
+    """(B, 4) support planes ``[nx, ny, nz, offset]`` for the first ``plane_fraction`` of the batch (zero
+    rows for the rest): tangent to the object at its extreme point along a direction d (random unit, or
+    -z for ``plane_direction="down"``), normal ``n = -d`` pointing at the object, so ``n . v >= offset``
+    is the free side."""
+    s, b = settings, settings.batch
+    verts = torch.as_tensor(vertices, dtype=torch.float32)
+    k = int(round(s.plane_fraction * b))
+    d = torch.randn(b, 3, generator=generator)
+    if s.plane_direction == "down":
+        d = torch.tensor([0.0, 0.0, -1.0]).expand(b, 3).clone()
+    elif s.plane_direction != "random":
+        raise ValueError(f"plane_direction must be 'random' or 'down', not {s.plane_direction!r}")
+    d = d / d.norm(dim=-1, keepdim=True)
+    offset = -(verts @ d.T).max(0).values  # n . v >= offset with n = -d  <=>  d . v <= max_v d . v
+    planes = torch.cat([-d, offset[:, None]], 1)
+    planes[k:] = 0.0
+    return planes
+
+
+def initial_grasps(hand: HandModel, vertices: np.ndarray, settings: SynthesisSettings, generator: torch.Generator,
+                   planes: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """Hands around the object, palm facing it: (B, 51) poses and (B, n) contact indices.
 
     Each hand's palm centre is put at ``init_distance`` beyond the object's extent along a random
     direction u, the palm normal (-y in the hand frame) pointing along -u, with a random roll about u;
-    fingers in ``init_preset`` with Gaussian jitter (``init_jitter`` radians).
+    fingers in ``init_preset`` with Gaussian jitter (``init_jitter`` radians). With (B, 4) ``planes``, u
+    is flipped into the free side of its grasp's plane.
     """
     s, b = settings, settings.batch
     dtype = hand.rest_vertices.dtype
@@ -177,6 +219,9 @@ def initial_grasps(hand: HandModel, vertices: np.ndarray, settings: SynthesisSet
     centre = verts.mean(0)
     u = torch.randn(b, 3, generator=generator, dtype=dtype)
     u = u / u.norm(dim=-1, keepdim=True)
+    if planes is not None:
+        n = planes[:, :3].to(dtype)
+        u = torch.where(((u * n).sum(-1, keepdim=True) < 0), -u, u)
     extent = ((verts - centre) @ u.T).max(0).values  # (B,) support distance along u
     dist = s.init_distance[0] + (s.init_distance[1] - s.init_distance[0]) * torch.rand(b, generator=generator, dtype=dtype)
     palm_target = centre + u * (extent + dist)[:, None]
@@ -216,8 +261,9 @@ def synthesize(hand: HandModel, sdf: SDFGrid, vertices: np.ndarray, settings: Sy
     """
     s = settings
     g = torch.Generator().manual_seed(int(seed))
-    energy = GraspEnergy(hand, sdf, s)
-    pose, contact = initial_grasps(hand, vertices, s, g)
+    planes = support_planes(vertices, s, g)
+    energy = GraspEnergy(hand, sdf, s, planes)
+    pose, contact = initial_grasps(hand, vertices, s, g, planes)
     pose = pose.detach().requires_grad_(True)
     e = energy(pose, contact)
     (grad,) = torch.autograd.grad(e.total.sum(), pose)
@@ -248,4 +294,34 @@ def synthesize(hand: HandModel, sdf: SDFGrid, vertices: np.ndarray, settings: Sy
             e = Energies(**{k: torch.where(accept, getattr(new_e, k), getattr(e, k)).detach()
                             for k in e.__dict__})
         history.append(float(e.total.mean()))
-    return SynthesisResult(pose.detach(), contact, e.detach(), history)
+    if s.refine_iterations > 0:
+        pose, e = _refine(energy, pose.detach(), contact, e, s, history, progress)
+    return SynthesisResult(pose.detach(), contact, planes, e.detach(), history)
+
+
+def _refine(energy: GraspEnergy, pose: torch.Tensor, contact: torch.Tensor, e: Energies, s: SynthesisSettings,
+            history: list[float], progress: bool) -> tuple[torch.Tensor, Energies]:
+    """Polish the annealed grasps with their contacts fixed: Adam on the same energy, the learning rate
+    decaying to zero on a cosine; every grasp keeps the lowest-energy pose it visited."""
+    best_pose, best = pose.clone(), e
+    x = pose.clone().requires_grad_(True)
+    opt = torch.optim.Adam([x], lr=s.refine_lr)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, s.refine_iterations)
+    steps = range(s.refine_iterations)
+    if progress:
+        from tqdm import tqdm
+
+        steps = tqdm(steps, desc="refine", mininterval=5.0)
+    for _ in steps:
+        cur = energy(x, contact)
+        with torch.no_grad():
+            better = cur.total < best.total
+            best_pose = torch.where(better[:, None], x.detach(), best_pose)
+            best = Energies(**{k: torch.where(better, getattr(cur, k), getattr(best, k)).detach()
+                               for k in best.__dict__})
+        opt.zero_grad()
+        cur.total.sum().backward()
+        opt.step()
+        sched.step()
+        history.append(float(best.total.mean()))
+    return best_pose, best

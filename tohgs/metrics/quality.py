@@ -7,9 +7,12 @@
   restitution 0); the object its convex decomposition, mass 1, friction 3, restitution 0.5, its inertial
   frame at the mesh's vertex mean; time step 1/240 s, 150 solver iterations, 35 steps (the official
   code's setting, not the paper's "1 s"); SD is how far the object's centre moved, m; a failed simulation
-  counts 0.10 m. Gravity is a setting: the official code applies it along +y of its camera-derived frame;
-  tohgs's prior grasps live in the object's frame with z up (the frame the object rests in on the table),
-  so the default is -z, the direction the object will be held against.
+  counts 0.10 m. Gravity is a setting (``gravity_direction``): the official code applies it along +y of
+  its camera-derived frame, which has no meaning for tohgs's grasps. ``"away_from_palm"`` (the default)
+  pulls the object from the palm centre through the object's centre: the direction it is lifted against
+  when the hand approaches from the free side of its support (a table top, a shelf board), whatever
+  orientation the object rests in; ``"fixed"`` uses the ``gravity`` vector of the grasp's frame (for
+  grasps in the world frame, -z).
 - Contact: PV > 0, and separately the smallest signed distance from the hand's vertices to the object's
   surface (negative inside), m.
 """
@@ -64,6 +67,13 @@ def penetration_volume(hand_vertices: np.ndarray, hand_faces: np.ndarray, voxels
     return out[0] if single else out
 
 
+def palm_gravity(palm_centres: np.ndarray, object_centre: np.ndarray, magnitude: float = 9.8) -> np.ndarray:
+    """(B, 3) gravity vectors pulling the object away from each palm: ``magnitude`` along the unit vector
+    from the (B, 3) palm centres to the object's centre (m/s^2)."""
+    d = np.asarray(object_centre, dtype=np.float64) - np.asarray(palm_centres, dtype=np.float64)
+    return magnitude * d / np.linalg.norm(d, axis=-1, keepdims=True).clip(1e-9)
+
+
 def contact_distance(hand_vertices: np.ndarray, object_mesh: trimesh.Trimesh) -> np.ndarray:
     """Smallest signed distance from the hand's vertices to the object's surface (negative inside), m.
 
@@ -87,6 +97,7 @@ class SDSettings:
     """The simulation-displacement protocol (SI units); defaults are the official evaluation code's."""
 
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.8)
+    gravity_direction: str = "away_from_palm"
     time_step: float = 1.0 / 240.0
     solver_iterations: int = 150
     steps: int = 35
@@ -130,18 +141,20 @@ class DisplacementSimulator:
         self.close()
 
     def displacement(self, hand_vertices: np.ndarray, hand_faces: np.ndarray,
-                     object_pose: np.ndarray | None = None) -> float:
+                     object_pose: np.ndarray | None = None, gravity: np.ndarray | None = None) -> float:
         """SD of one hand, m.
 
         Args:
             hand_vertices: (V, 3) metres, world frame.
             hand_faces: (F, 3) hand triangles.
             object_pose: the object's mesh-frame pose ``[x, y, z, qx, qy, qz, qw]`` (default: identity).
+            gravity: (3,) m/s^2 for this hand (default: the settings' ``gravity``).
         """
         pb, s, cid = self._pb, self.settings, self.cid
+        g = np.asarray(s.gravity if gravity is None else gravity, dtype=np.float64)
         try:
             pb.resetSimulation(physicsClientId=cid)
-            pb.setGravity(*s.gravity, physicsClientId=cid)
+            pb.setGravity(*g.tolist(), physicsClientId=cid)
             pb.setTimeStep(s.time_step, physicsClientId=cid)
             pb.setPhysicsEngineParameter(numSolverIterations=s.solver_iterations, physicsClientId=cid)
             hand_col = pb.createCollisionShape(pb.GEOM_MESH, vertices=np.asarray(hand_vertices, dtype=np.float64).tolist(),

@@ -24,11 +24,13 @@ except (ValueError, FileNotFoundError) as err:
 OBJECT_NAME = "(pb|brick|dir)-[a-z0-9-]+"  # the {object} wildcard (see tohgs.assets.sources)
 
 
-def code(*packages):
-    """The tohgs source files of the given packages: the code inputs of a job, so an edit makes it stale."""
+def code(*modules):
+    """The tohgs source files a job runs: packages ("sim": all its modules) or single modules
+    ("data/scenes"). They are the job's code inputs, so an edit makes it stale."""
     files = []
-    for pkg in packages:
-        files += sorted((REPO / "tohgs" / pkg).glob("*.py"))
+    for name in modules:
+        path = REPO / "tohgs" / name
+        files += [path.with_suffix(".py")] if len(Path(name).parts) > 1 else sorted(path.glob("*.py"))
     return [os.path.relpath(f) for f in files]
 
 
@@ -97,6 +99,79 @@ def scene_settings(wildcards):
     return _canonical({k: config["scenes"][k] for k in keys})
 
 
+def prior_stores(wildcards):
+    """The filtered prior-grasp store of every accepted object (objects and bricks)."""
+    catalog = read_catalog(checkpoints.catalog.get().output[0])
+    return expand("results/grasps/prior/{object}.zarr", object=sorted(catalog.name))
+
+
+def plane_direction(wildcards):
+    """Support planes of the synthesis: under a brick (bricks rest upright), any direction for objects."""
+    return "down" if OBJECTS[wildcards.object].source == "bricks" else "random"
+
+
+SPLITS = ("train", "val", "test")
+
+
+def split_objects(wildcards):
+    """Accepted target objects of the task's set in the split (the catalog's split column)."""
+    catalog = read_catalog(checkpoints.catalog.get().output[0])
+    sel = catalog[(catalog.task_set == task_set(wildcards.task)) & (catalog.split == wildcards.split)]
+    return sorted(sel.name)
+
+
+def split_scene_stores(wildcards):
+    return expand("results/scenes/{task}/{object}.zarr", task=wildcards.task, object=split_objects(wildcards))
+
+
+def split_task_grasps(wildcards):
+    return expand("results/grasps/task/{task}/{object}.zarr", task=wildcards.task, object=split_objects(wildcards))
+
+
+def map_shards_of(task):
+    """Every map shard of a task (all splits)."""
+    return [f"results/maps/{task}/{split}/shard-{k}.zarr" for split in SPLITS
+            for k in range(config["maps"]["shards"][split])]
+
+
+def all_map_shards(wildcards):
+    return [p for task in config["scenes"]["tasks"] for p in map_shards_of(task)]
+
+
+def all_task_grasps(wildcards):
+    return [f"results/grasps/task/{task}/{o}.zarr" for task in config["scenes"]["tasks"] for o in accepted_objects(task)]
+
+
+MODELS = ("contact_diffuser", "grasp_diffuser")
+# Prediction methods of the diffusers: where their contact maps come from.
+METHOD_CONTACT = {"ours": "model", "ours-gt-contact": "ground_truth"}
+
+
+def train_shards(wildcards):
+    return [f"results/maps/{wildcards.task}/train/shard-{k}.zarr" for k in range(config["maps"]["shards"]["train"])]
+
+
+def test_shards(wildcards):
+    return [f"results/maps/{wildcards.task}/test/shard-{k}.zarr" for k in range(config["maps"]["shards"]["test"])]
+
+
+def contact_model_of(wildcards):
+    """ContactDiffuser's checkpoint when the method samples contact maps from it."""
+    if METHOD_CONTACT[wildcards.method] == "model":
+        return [f"results/models/{wildcards.task}/contact_diffuser.pt"]
+    return []
+
+
+def contact_source_of(wildcards):
+    return METHOD_CONTACT[wildcards.method]
+
+
+def prediction_outputs():
+    """Every task's prediction store of every configured method."""
+    return [f"results/predictions/{task}/{m}.zarr" for task in config["scenes"]["tasks"]
+            for m in config["prediction"]["methods"]]
+
+
 def final_outputs():
     """The default target's outputs known before the catalog exists (see catalog_outputs)."""
     return [
@@ -104,7 +179,11 @@ def final_outputs():
         "results/objects/supports",
         "results/figures/objects.png",
         "results/figures/hand.png",
-    ] + [f"results/figures/scenes_{task}.png" for task in config["scenes"]["tasks"]]
+        "results/grasps/prior/summary.csv",
+        "results/figures/prior_grasps.png",
+        "results/maps/summary.csv",
+        "results/figures/maps.png",
+    ] + prediction_outputs() + [f"results/figures/scenes_{task}.png" for task in config["scenes"]["tasks"]]
 
 
 def catalog_outputs(wildcards):

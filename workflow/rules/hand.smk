@@ -22,7 +22,7 @@ rule hand_model:
 rule hand_figure:
     input:
         hand="results/hand/hand.npz",
-        code=code("hand", "viz"),
+        code=code("hand", "viz/hand", "viz/render"),
     output:
         report("results/figures/hand.png", caption="../report/hand.rst", category="Hand"),
     conda:

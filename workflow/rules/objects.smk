@@ -61,7 +61,7 @@ rule objects_figure:
     input:
         catalog="results/objects/catalog.csv",
         objects=object_dirs(),
-        code=code("viz"),
+        code=code("viz/objects", "viz/render"),
     output:
         report("results/figures/objects.png", caption="../report/objects.rst", category="Objects"),
     params:

@@ -6,7 +6,7 @@ rule scenes:
     input:
         objects=object_dirs(),
         supports="results/objects/supports",
-        code=code("sim", "data"),
+        code=code("sim", "data/scenes"),
     output:
         directory("results/scenes/{task}/{object}.zarr"),
     params:
@@ -27,7 +27,7 @@ rule scenes_figure:
     input:
         scenes=scene_stores,
         supports="results/objects/supports",
-        code=code("viz", "sim", "data"),
+        code=code("viz/scenes", "viz/render", "sim", "data/scenes"),
     output:
         report("results/figures/scenes_{task}.png", caption="../report/scenes.rst", category="Scenes"),
     params:

@@ -1,0 +1,173 @@
+"""Maps: distances and normalisation against brute force, sampling, shards (round trip, refusals,
+determinism) and the dataset's rotation augmentation."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+
+from tohgs.assets.bricks import make_brick
+from tohgs.assets.supports import write_supports
+from tohgs.data.build_maps import make_map_shard, shard_items
+from tohgs.data.maps import MapDataset, read_map_shard
+from tohgs.data.scenes import write_scenes
+from tohgs.data.task_grasps import write_task_grasps
+from tohgs.geometry.maps import (farthest_point_sampling, nearest_distance, nearest_distance_brute, normalised_map,
+                                 sample_surface, scene_cloud)
+from tohgs.grasps.expand import ExpansionSettings, expand_configurations
+from tohgs.hand import load_hand
+
+
+def test_nearest_distances_match_brute_force():
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(700, 3)), rng.normal(size=(1300, 3))
+    np.testing.assert_allclose(nearest_distance(a, b), nearest_distance_brute(a, b), rtol=1e-12)
+    np.testing.assert_allclose(nearest_distance(b[:5], b), 0.0)
+
+
+def test_normalised_map_is_one_at_contact_and_falls_with_distance():
+    d = np.array([0.0, 0.01, 0.05, 0.2])
+    m = normalised_map(d, 30.0)
+    assert m[0] == pytest.approx(1.0) and np.all(np.diff(m) < 0) and np.all(m > 0)
+    assert m[1] == pytest.approx(1 - 2 * (1 / (1 + np.exp(-0.3)) - 0.5))
+    assert normalised_map(0.01, 100.0) < normalised_map(0.01, 30.0)  # contact maps are sharper
+
+
+def test_surface_samples_lie_on_the_surface_with_outward_normals():
+    box = trimesh.creation.box(extents=[0.1, 0.06, 0.04])
+    pts, nrm = sample_surface(box, 2000, np.random.default_rng(0))
+    assert np.abs(np.abs(pts) - [0.05, 0.03, 0.02]).min(1).max() < 1e-9  # each point on some face
+    assert ((pts * nrm).sum(1) > 0).all()
+    # Area-weighted: the two large faces (0.1 x 0.06) hold about 0.006 / 0.0148 of the samples.
+    share = (np.abs(nrm[:, 2]) > 0.5).mean()
+    assert share == pytest.approx(2 * 0.1 * 0.06 / (2 * (0.1 * 0.06 + 0.1 * 0.04 + 0.06 * 0.04)), abs=0.04)
+
+
+def test_farthest_point_sampling_covers_better_than_random():
+    rng = np.random.default_rng(1)
+    pts = rng.random((3000, 3))
+    idx = farthest_point_sampling(pts, 100)
+    assert len(np.unique(idx)) == 100
+    cover_fps = nearest_distance(pts, pts[idx]).max()
+    cover_rand = nearest_distance(pts, pts[rng.choice(3000, 100, replace=False)]).max()
+    assert cover_fps < 0.75 * cover_rand
+    cloud = scene_cloud([trimesh.creation.box(extents=[1, 1, 0.05])], 256, np.random.default_rng(0))
+    assert cloud.shape == (256, 3)
+
+
+def test_shard_items_deal_configurations_round_robin():
+    n = {"b": 3, "a": 2}
+    all_items = shard_items(n, "train", 10, 1, 0)
+    assert all_items == [("a", 0), ("a", 1), ("b", 0), ("b", 1), ("b", 2)]
+    parts = [shard_items(n, "train", 10, 2, k) for k in range(2)]
+    assert sorted(parts[0] + parts[1]) == all_items and len(parts[0]) == 3
+    assert shard_items(n, "test", 1, 1, 0) == [("a", 0), ("b", 0)]
+    with pytest.raises(ValueError, match="out of range"):
+        shard_items(n, "train", 10, 2, 2)
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    """A tiny dataset: the cube brick on the table, two configurations, a grasp from above."""
+    from tests.test_expand import _scene
+
+    tmp = tmp_path_factory.mktemp("maps")
+    hand = load_hand("anny")
+    cube = make_brick("cube")
+    cube.apply_translation(-cube.center_mass)
+    (tmp / "objects" / "brick-cube").mkdir(parents=True)
+    cube.export(tmp / "objects" / "brick-cube" / "mesh.obj")
+    write_supports([1.5, 1.0, 0.05], [], tmp / "objects" / "supports")
+    sc = _scene(None)
+    two = type(sc)(**{**sc.__dict__})
+    for name in ("target_init_pose", "target_goal_pose", "support_id", "support_pose", "base_id", "base_pose"):
+        setattr(two, name, np.concatenate([getattr(sc, name)] * 2))
+    two.target_goal_pose[1, :2] = [-0.2, 0.25]
+    two.obstacle_offsets = np.array([0, 0, 0], np.int64)
+    (tmp / "scenes").mkdir()
+    write_scenes(two, tmp / "scenes" / "brick-cube.zarr")
+    grasp = hand.preset("relaxed", 3).numpy().astype(np.float64)
+    with torch.no_grad():
+        v = hand(torch.as_tensor(grasp, dtype=torch.float32)).vertices.numpy()
+    lowest = v[np.arange(3), v[:, :, 2].argmin(1)]  # (3, 3): put it 5 mm above the top face's centre
+    grasp[:, :3] += np.array([0.0, 0.0, cube.vertices[:, 2].max() + 0.005]) - lowest
+    grasp[:, 0] += [-0.01, 0.0, 0.01]
+    from tohgs.assets.supports import read_supports
+
+    out = expand_configurations(two, grasp, hand, tmp / "objects", read_supports(tmp / "objects/supports/supports.json"),
+                                ExpansionSettings())
+    (tmp / "task").mkdir()
+    write_task_grasps(out, {"task": "placing", "object": "brick-cube"}, tmp / "task" / "brick-cube.zarr")
+    kw = dict(task="placing", split="train", n_shards=1, objects=["brick-cube"], scenes_dir=tmp / "scenes",
+              task_grasps_dir=tmp / "task", objects_dir=tmp / "objects",
+              supports_json=tmp / "objects/supports/supports.json", hand=hand,
+              settings={"n_points": 256, "n_scene_points": 600, "scene_radius": 0.15}, test_configs=10, seed=0)
+    shard = make_map_shard(shard=0, out=tmp / "shard-0.zarr", **kw)
+    return tmp, hand, shard, kw, cube
+
+
+def test_shard_contents_and_maps(built):
+    tmp, hand, shard, _, cube = built
+    assert shard.n_configs == 2 and shard.n_grasps == 6
+    back = read_map_shard(tmp / "shard-0.zarr")
+    for k in ("points", "d_init", "contact", "grasp", "goal_transform"):
+        np.testing.assert_array_equal(back.arrays[k], shard.arrays[k])
+    assert np.abs(shard.points.mean(1)).max() < 1e-6  # network frame: centred at the initial pose
+    # The cube rests on the table at both poses: its bottom points are at the scene (D ~ 1), its top far.
+    z = shard.points[0, :, 2]
+    bottom, top = z < z.min() + 1e-4, z > z.max() - 1e-4
+    assert shard.d_init[0][bottom].mean() > 0.8 and shard.d_init[0][top].max() < 0.5
+    assert shard.d_goal[0][bottom].mean() > 0.8
+    # The contact map lights up where the hand is: the top face, not the bottom one.
+    c = shard.contact[0]
+    assert c[top].max() > 0.6 and c[bottom].max() < 0.1
+    # The hand rebuilt from the stored grasp (network frame) touches the points the map says it does.
+    with torch.no_grad():
+        hv = hand(torch.as_tensor(shard.grasp[:1])).vertices.numpy()[0]
+    np.testing.assert_allclose(normalised_map(nearest_distance(shard.points[0], hv), 100.0), c, atol=1e-4)
+
+
+def test_same_seed_same_shard_and_broken_shards_are_refused(built):
+    tmp, _, shard, kw, _ = built
+    again = make_map_shard(shard=0, out=tmp / "again.zarr", **kw)
+    for k, v in shard.arrays.items():
+        np.testing.assert_array_equal(again.arrays[k], v)
+    bad = tmp / "bad.zarr"
+    shutil.copytree(tmp / "shard-0.zarr", bad)
+    shutil.rmtree(bad / "contact")
+    with pytest.raises(ValueError, match=r"bad.zarr: missing array 'contact'"):
+        read_map_shard(bad)
+    shutil.rmtree(bad)
+    shutil.copytree(tmp / "shard-0.zarr", bad)
+    for f in (bad / "points" / "c").rglob("*"):
+        if f.is_file():
+            f.write_bytes(f.read_bytes()[: len(f.read_bytes()) // 2])  # truncated shard file
+    with pytest.raises(ValueError, match=r"bad.zarr: array 'points' is unreadable or truncated"):
+        read_map_shard(bad)
+    meta = bad / "zarr.json"
+    meta.write_text(meta.read_text().replace('"schema_version": 1', '"schema_version": 99'))
+    with pytest.raises(ValueError, match="bad.zarr: schema version 99"):
+        read_map_shard(bad)
+
+
+def test_rotation_augmentation_rotates_the_hand_mesh(built):
+    tmp, hand, _, _, _ = built
+    plain = MapDataset([tmp / "shard-0.zarr"], per="grasp")
+    turned = MapDataset([tmp / "shard-0.zarr"], per="grasp", rotation="so3", seed=3)
+    assert len(plain) == 6
+    for i in range(len(plain)):
+        a, b = plain[i], turned[i]
+        # Recover R from the points (same order), then compare the hand meshes.
+        R, *_ = np.linalg.lstsq(a["points"].astype(np.float64), b["points"].astype(np.float64), rcond=None)
+        with torch.no_grad():
+            va = hand(torch.as_tensor(a["grasp"][None])).vertices.numpy()[0]
+            vb = hand(torch.as_tensor(b["grasp"][None])).vertices.numpy()[0]
+        np.testing.assert_allclose(vb, va @ R, atol=1e-4)
+        np.testing.assert_array_equal(a["contact"], b["contact"])
+    assert not np.allclose(turned[0]["points"], turned[1]["points"])  # a new rotation per item
+    tests = MapDataset([tmp / "shard-0.zarr"], per="config")
+    assert len(tests) == 2 and "grasp" not in tests[0]

@@ -1,0 +1,93 @@
+"""Training and prediction on a tiny shard: checkpoints, resuming, EMA weights, predictions' frames."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from tests.test_diffusion import SMALL_PN
+from tests.test_maps import built  # noqa: F401  (the module-scoped fixture)
+from tohgs.data.predictions import read_predictions
+from tohgs.grasps.expand import transform_grasp
+from tohgs.models.predict import predict
+from tohgs.models.train import load_model, train_model
+
+TINY = {"contact_diffuser": {"d_model": 16, "n_blocks": 1, "pointnet": SMALL_PN},
+        "grasp_diffuser": {"d_model": 16, "n_blocks": 1, "pointnet": SMALL_PN}}
+SETTINGS = {"steps": 10, "batch": 3, "warmup": 2, "log_every": 2, "checkpoint_every": 5, "train_points": 128,
+            "device": "cpu"}
+
+
+@pytest.fixture(scope="module")
+def trained(built, tmp_path_factory):  # noqa: F811
+    tmp, hand, _, _, _ = built
+    out = tmp_path_factory.mktemp("models")
+    paths = {}
+    for name in ("contact_diffuser", "grasp_diffuser"):
+        paths[name] = out / f"{name}.pt"
+        train_model(name, "placing", [tmp / "shard-0.zarr"], TINY[name], SETTINGS, paths[name], hand=hand,
+                    curve_png=out / f"{name}.png")
+    return tmp, hand, out, paths
+
+
+def test_checkpoints_hold_weights_config_normaliser_and_curve(trained):
+    _, _, out, paths = trained
+    for name, path in paths.items():
+        model, ckpt = load_model(path)
+        assert ckpt["name"] == name and ckpt["model_config"] == TINY[name] and len(ckpt["loss_curve"]) == 5
+        assert all(np.isfinite(r["loss"]) for r in ckpt["loss_curve"]) and (out / f"{name}.png").stat().st_size > 5000
+        assert not path.with_name(path.name + ".resume").exists()
+    g, _ = load_model(paths["grasp_diffuser"])
+    assert not torch.allclose(g.grasp_std, torch.ones(51)), "the grasp normaliser is saved"
+    with pytest.raises(ValueError, match="not a readable checkpoint"):
+        load_model(out / "contact_diffuser.png")
+
+
+def test_an_interrupted_run_resumes_to_the_same_weights(trained, monkeypatch):
+    tmp, hand, out, paths = trained
+    calls = {"n": 0}
+    real = torch.nn.utils.clip_grad_norm_
+
+    def crash(*a, **k):
+        calls["n"] += 1
+        if calls["n"] == 8:
+            raise KeyboardInterrupt("simulated kill")
+        return real(*a, **k)
+
+    target = out / "again.pt"
+    monkeypatch.setattr(torch.nn.utils, "clip_grad_norm_", crash)
+    with pytest.raises(KeyboardInterrupt):
+        train_model("contact_diffuser", "placing", [tmp / "shard-0.zarr"], TINY["contact_diffuser"], SETTINGS, target,
+                    hand=hand)
+    assert target.with_name("again.pt.resume").is_file() and not target.exists()
+    monkeypatch.setattr(torch.nn.utils, "clip_grad_norm_", real)
+    resumed = train_model("contact_diffuser", "placing", [tmp / "shard-0.zarr"], TINY["contact_diffuser"], SETTINGS,
+                          target, hand=hand)
+    straight = torch.load(paths["contact_diffuser"], weights_only=False)
+    for k, v in straight["state_dict"].items():
+        torch.testing.assert_close(resumed["state_dict"][k], v, msg=k)
+
+
+def test_predictions_are_reproducible_and_carried_to_the_goal(trained):
+    tmp, hand, out, paths = trained
+    settings = {"samples": 3, "sampler": "ddim", "steps": 4, "seed": 1, "device": "cpu"}
+    a = predict("placing", "ours", [tmp / "shard-0.zarr"], paths["grasp_diffuser"], "model", settings, out / "p.zarr",
+                contact_ckpt=paths["contact_diffuser"])
+    b = predict("placing", "ours", [tmp / "shard-0.zarr"], paths["grasp_diffuser"], "model", settings, out / "q.zarr",
+                contact_ckpt=paths["contact_diffuser"])
+    np.testing.assert_array_equal(a["grasp_init"], b["grasp_init"])
+    arrays, attrs = read_predictions(out / "p.zarr")
+    assert arrays["grasp_init"].shape == (2, 3, 51) and arrays["contact"].shape == (2, 3, 256)
+    assert attrs["timing"]["seconds_per_grasp"] > 0 and attrs["contact_source"] == "model"
+    assert arrays["contact"].min() >= 0 and arrays["contact"].max() <= 1
+    from tohgs.data.maps import read_map_shard
+
+    sh = read_map_shard(tmp / "shard-0.zarr")
+    wrist = np.asarray(sh.attrs["hand_wrist"])
+    for c in range(2):
+        moved = transform_grasp(arrays["grasp_init"][c], sh.goal_transform[c], wrist)
+        np.testing.assert_allclose(arrays["grasp_goal"][c], moved, atol=1e-5)
+    gt = predict("placing", "ours-gt-contact", [tmp / "shard-0.zarr"], paths["grasp_diffuser"], "ground_truth",
+                 settings, out / "gt.zarr")
+    np.testing.assert_array_equal(gt["contact"][0][0], sh.contact[np.flatnonzero(sh.grasp_config == 0)[0]])

@@ -1,0 +1,222 @@
+"""Build map shards from scene stores and task grasps (the dataset stage's workhorse).
+
+The configurations of one task and split (all of them for train and validation objects, the first
+``test_configs`` of each test object) are listed in a fixed order (object name, then configuration) and
+dealt round-robin to ``n_shards`` shards, so each shard is one independent job. Per configuration:
+
+- the object cloud: ``n_points`` area-weighted surface samples of the target with normals (drawn once per
+  object from the seed and the object's name), placed at the initial pose;
+- the scene cloud: support, obstacles and base sampled within ``scene_radius`` of the target's two
+  positions (0: everywhere, as the paper) and farthest-point reduced to ``n_scene_points``;
+- ``d_init`` / ``d_goal``: the normalised distance from each object point, with the target at its initial
+  / goal pose, to the scene cloud;
+- per task grasp: the contact map (normalised distance from each object point to the nearest hand vertex)
+  and the grasp vector, both in the network frame (:mod:`tohgs.data.maps`).
+"""
+
+from __future__ import annotations
+
+import logging
+import zlib
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import trimesh
+
+from tohgs.data.maps import MapShard, write_map_shard
+from tohgs.geometry.maps import nearest_distance, normalised_map, sample_surface, scene_cloud
+from tohgs.grasps.expand import pose_matrix, scene_meshes
+from tohgs.hand.model import HandModel
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class MapSettings:
+    """Sizes and constants of the maps (see config ``maps``)."""
+
+    n_points: int = 512
+    n_scene_points: int = 2048
+    alpha_distance: float = 30.0
+    alpha_contact: float = 100.0
+    max_grasps_per_config: int = 0  # 0 keeps every task grasp
+    scene_radius: float = 0.25  # m around the target's two positions; 0 = the whole scene (the paper)
+
+
+def shard_items(n_configs: dict[str, int], split: str, test_configs: int, n_shards: int, shard: int
+                ) -> list[tuple[str, int]]:
+    """``(object, configuration)`` pairs of shard ``shard`` of ``n_shards`` (round-robin over the sorted list)."""
+    if not 0 <= shard < n_shards:
+        raise ValueError(f"shard {shard} out of range 0..{n_shards - 1}")
+    items = [(name, c) for name in sorted(n_configs)
+             for c in range(min(n_configs[name], test_configs) if split == "test" else n_configs[name])]
+    return items[shard::n_shards]
+
+
+def _object_cloud(objects_dir: Path, name: str, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    mesh = trimesh.load(objects_dir / name / "mesh.obj", force="mesh", process=False)
+    return sample_surface(mesh, n, np.random.default_rng([int(seed), zlib.crc32(name.encode())]))
+
+
+def make_map_shard(task: str, split: str, shard: int, n_shards: int, objects: list[str], scenes_dir: str | Path,
+                   task_grasps_dir: str | Path, objects_dir: str | Path, supports_json: str | Path, hand: HandModel,
+                   settings: dict, test_configs: int, seed: int, out: str | Path) -> MapShard:
+    """Build and write shard ``shard`` of ``n_shards`` of one task and split.
+
+    Args:
+        task, split: the task and the split (``train``, ``val`` or ``test``).
+        objects: the split's target objects.
+        scenes_dir, task_grasps_dir: ``results/scenes/<task>`` and ``results/grasps/task/<task>``.
+        objects_dir, supports_json: the objects stage's outputs.
+        hand: the hand model (for contact maps).
+        settings: a config mapping of :class:`MapSettings`.
+        test_configs: configurations per test object.
+        seed: the global seed.
+        out: the shard to write.
+    """
+    from tohgs.assets.supports import read_supports
+    from tohgs.data.scenes import read_scenes
+    from tohgs.data.task_grasps import read_task_grasps
+
+    s = MapSettings(**settings)
+    objects_dir = Path(objects_dir)
+    supports = read_supports(supports_json)
+    scenes = {o: read_scenes(Path(scenes_dir) / f"{o}.zarr") for o in objects}
+    grasps = {o: read_task_grasps(Path(task_grasps_dir) / f"{o}.zarr")[0] for o in objects}
+    items = shard_items({o: len(sc) for o, sc in scenes.items()}, split, test_configs, n_shards, shard)
+    vocab = sorted(objects)
+    wrist = hand.rest_joints[0].cpu().numpy().astype(np.float64)
+    clouds: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    mesh_cache: dict[str, trimesh.Trimesh] = {}
+    cfg_rows: dict[str, list] = {k: [] for k in ("object_id", "config_index", "points", "normals", "d_init", "d_goal",
+                                                  "scene", "centroid", "goal_transform")}
+    g_rows: dict[str, list] = {k: [] for k in ("grasp_config", "grasp_prior_index", "grasp", "contact")}
+    try:
+        from tqdm import tqdm
+
+        it = tqdm(items, desc=f"maps {task}/{split}/{shard}", mininterval=5.0)
+    except ImportError:  # pragma: no cover
+        it = items
+    for name, c in it:
+        sc = scenes[name]
+        if name not in clouds:
+            clouds[name] = _object_cloud(objects_dir, name, s.n_points, seed)
+        pts, nrm = clouds[name]
+        T_init, T_goal = pose_matrix(sc.target_init_pose[c]), pose_matrix(sc.target_goal_pose[c])
+        p_init = pts @ T_init[:3, :3].T + T_init[:3, 3]
+        p_goal = pts @ T_goal[:3, :3].T + T_goal[:3, 3]
+        centroid = p_init.mean(0)
+        rng = np.random.default_rng([int(seed), zlib.crc32(f"{task}/{name}/{c}".encode())])
+        cloud = scene_cloud(scene_meshes(sc, c, objects_dir, supports, mesh_cache), s.n_scene_points, rng,
+                            centres=np.stack([T_init[:3, 3], T_goal[:3, 3]]), radius=s.scene_radius)
+        row = len(cfg_rows["object_id"])
+        cfg_rows["object_id"].append(vocab.index(name))
+        cfg_rows["config_index"].append(c)
+        cfg_rows["points"].append(p_init - centroid)
+        cfg_rows["normals"].append(nrm @ T_init[:3, :3].T)
+        cfg_rows["d_init"].append(normalised_map(nearest_distance(p_init, cloud), s.alpha_distance))
+        cfg_rows["d_goal"].append(normalised_map(nearest_distance(p_goal, cloud), s.alpha_distance))
+        cfg_rows["scene"].append(cloud - centroid)
+        cfg_rows["centroid"].append(centroid)
+        cfg_rows["goal_transform"].append(T_goal @ np.linalg.inv(T_init))
+        g = grasps[name]
+        sel = np.flatnonzero(g["config"] == c)
+        if s.max_grasps_per_config > 0:
+            sel = sel[: s.max_grasps_per_config]
+        if len(sel):
+            world = g["grasp_init"][sel].astype(np.float64)
+            with torch.no_grad():
+                hv = hand(torch.as_tensor(world, dtype=hand.rest_vertices.dtype)).vertices.cpu().numpy()
+            for j, k in enumerate(sel):
+                g_rows["contact"].append(normalised_map(nearest_distance(p_init, hv[j]), s.alpha_contact))
+            local = world.copy()
+            local[:, :3] -= centroid  # a pure translation of the frame: only the grasp's translation moves
+            g_rows["grasp"].append(local)
+            g_rows["grasp_config"] += [row] * len(sel)
+            g_rows["grasp_prior_index"] += g["prior_index"][sel].tolist()
+    n, ns = s.n_points, s.n_scene_points
+
+    def stack(rows: list, shape: tuple[int, ...], dtype) -> np.ndarray:
+        return np.stack(rows).astype(dtype) if rows else np.zeros((0, *shape), dtype)
+
+    arrays = {
+        "object_id": np.asarray(cfg_rows["object_id"], np.int32), "config_index": np.asarray(cfg_rows["config_index"], np.int32),
+        "points": stack(cfg_rows["points"], (n, 3), np.float32), "normals": stack(cfg_rows["normals"], (n, 3), np.float32),
+        "d_init": stack(cfg_rows["d_init"], (n,), np.float32), "d_goal": stack(cfg_rows["d_goal"], (n,), np.float32),
+        "scene": stack(cfg_rows["scene"], (ns, 3), np.float32), "centroid": stack(cfg_rows["centroid"], (3,), np.float64),
+        "goal_transform": stack(cfg_rows["goal_transform"], (4, 4), np.float64),
+        "grasp_config": np.asarray(g_rows["grasp_config"], np.int32),
+        "grasp_prior_index": np.asarray(g_rows["grasp_prior_index"], np.int32),
+        "grasp": np.concatenate(g_rows["grasp"]).astype(np.float32) if g_rows["grasp"] else np.zeros((0, 51), np.float32),
+        "contact": stack(g_rows["contact"], (n,), np.float32),
+    }
+    shard_data = MapShard(arrays, {"task": task, "split": split, "shard": shard, "n_shards": n_shards, "objects": vocab,
+                                   "hand_wrist": wrist.tolist(), "alpha_distance": s.alpha_distance,
+                                   "alpha_contact": s.alpha_contact, "seed": int(seed),
+                                   "config": {**asdict(s), "test_configs": test_configs}})
+    write_map_shard(shard_data, out)
+    log.info("%s/%s shard %d of %d: %d configurations, %d grasps", task, split, shard, n_shards,
+             shard_data.n_configs, shard_data.n_grasps)
+    return shard_data
+
+
+PAPER_TASK_GRASPS = 1_380_000  # the paper's task grasps over the three tasks (its section 3)
+
+
+def _size_on_disk(path: Path) -> int:
+    return sum(f.stat().st_size for f in Path(path).rglob("*") if f.is_file())
+
+
+def summarize_dataset(task_grasp_stores: list[str | Path], shards: list[str | Path], out_csv: str | Path,
+                      paper_points: int = 2048, paper_scene_points: int = 6000):
+    """One row per task and split (shards, configurations, grasps, bytes on disk) plus a row per task of the
+    task grasps; logs the paper-scale size estimate. Returns the table (``pandas.DataFrame``)."""
+    import pandas as pd
+
+    from tohgs.data.maps import read_map_shard
+    from tohgs.data.task_grasps import read_task_grasps
+    from tohgs.io import atomic_path
+
+    rows = []
+    per_task: dict[str, dict[str, int]] = {}
+    for p in task_grasp_stores:
+        arrays, attrs = read_task_grasps(p)
+        t = per_task.setdefault(attrs["task"], {"objects": 0, "configs": 0, "empty_configs": 0, "grasps": 0, "bytes": 0})
+        t["objects"] += 1
+        t["configs"] += len(arrays["kept_per_config"])
+        t["empty_configs"] += int((arrays["kept_per_config"] == 0).sum())
+        t["grasps"] += len(arrays["config"])
+        t["bytes"] += _size_on_disk(Path(p))
+    for task, t in sorted(per_task.items()):
+        rows.append({"task": task, "split": "task_grasps", "shards": 0, **t})
+        log.info("%s: %d task grasps over %d configurations of %d objects (%d configurations kept none)", task,
+                 t["grasps"], t["configs"], t["objects"], t["empty_configs"])
+    grouped: dict[tuple[str, str], dict[str, int]] = {}
+    for p in shards:
+        sh = read_map_shard(p)
+        key = (sh.attrs["task"], sh.attrs["split"])
+        g = grouped.setdefault(key, {"objects": 0, "configs": 0, "empty_configs": 0, "grasps": 0, "bytes": 0, "shards": 0})
+        g["shards"] += 1
+        g["configs"] += sh.n_configs
+        g["grasps"] += sh.n_grasps
+        g["objects"] = max(g["objects"], len(set(sh.object_id.tolist())))
+        size = _size_on_disk(Path(p))
+        g["bytes"] += size
+    for (task, split), g in sorted(grouped.items()):
+        rows.append({"task": task, "split": split, **g})
+        log.info("maps %s/%s: %d shards, %d configurations, %d grasps, %.1f MB on disk", task, split, g["shards"],
+                 g["configs"], g["grasps"], g["bytes"] / 1e6)
+    df = pd.DataFrame(rows, columns=["task", "split", "shards", "objects", "configs", "empty_configs", "grasps", "bytes"])
+    with atomic_path(out_csv) as tmp:
+        df.to_csv(tmp, index=False)
+    # Paper scale, uncompressed: every task grasp with a 2048-point contact map and its grasp vector, and
+    # per configuration the clouds and distance maps (about 1.38 M grasps; configurations ~ grasps / 30).
+    raw_grasp = (paper_points + 51) * 4 + 8
+    raw_config = (7 * paper_points + 3 * paper_scene_points) * 4 + 19 * 8 + 8
+    est = PAPER_TASK_GRASPS * raw_grasp + PAPER_TASK_GRASPS / 30 * raw_config
+    total_bytes = int(df[df.split != "task_grasps"].bytes.sum())
+    log.info("maps on disk: %.1f MB; paper scale (1.38 M grasps, 2048 / 6000 points) uncompressed: %.1f GB",
+             total_bytes / 1e6, est / 1e9)
+    return df

@@ -1,0 +1,188 @@
+"""Task expansion (paper section 3.2): prior grasps that stay collision-free with the target at both poses.
+
+For every scene configuration, each accepted prior grasp of the target (a 51-number grasp in the object's
+mesh frame) is placed with the target at its initial pose and carried rigidly to its goal pose. The grasp
+is kept for that configuration if, at both poses, no hand vertex lies deeper than ``tolerance`` inside a
+scene mesh other than the target (the table or shelf, the obstacles, the base brick). Inside-ness is
+open3d's ray-casting occupancy; the depth is the unsigned distance to the scene's surface.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from tohgs.hand.model import HandModel
+
+log = logging.getLogger(__name__)
+
+
+def pose_matrix(pose: np.ndarray) -> np.ndarray:
+    """(4, 4) homogeneous matrix of a ``[x, y, z, qx, qy, qz, qw]`` pose (metres, scipy's xyzw quaternion)."""
+    pose = np.asarray(pose, dtype=np.float64)
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_quat(pose[3:]).as_matrix()
+    T[:3, 3] = pose[:3]
+    return T
+
+
+def transform_grasp(grasp: np.ndarray, T: np.ndarray, wrist: np.ndarray) -> np.ndarray:
+    """The grasp vectors of hands moved rigidly by ``T``.
+
+    The hand model turns its global rotation ``R_g`` about the rest wrist joint ``j0`` and then translates
+    by ``t``: ``v = R_g (x - j0) + j0 + t``. Moving it by ``(R, p)`` gives ``R R_g`` and
+    ``t' = R (j0 + t) + p - j0``; the 45 finger numbers do not change.
+
+    Args:
+        grasp: (B, 51) grasp vectors (translation m, axis-angles rad).
+        T: (4, 4) rigid transform.
+        wrist: (3,) the hand's rest wrist joint ``j0`` (``hand.rest_joints[0]``), m.
+
+    Returns:
+        (B, 51) grasp vectors in the new frame.
+    """
+    g = np.array(grasp, dtype=np.float64, copy=True).reshape(-1, 51)
+    R, p = np.asarray(T, dtype=np.float64)[:3, :3], np.asarray(T, dtype=np.float64)[:3, 3]
+    j0 = np.asarray(wrist, dtype=np.float64)
+    g[:, 3:6] = (Rotation.from_matrix(R) * Rotation.from_rotvec(g[:, 3:6])).as_rotvec()
+    g[:, :3] = (j0 + g[:, :3]) @ R.T + p - j0
+    return g
+
+
+def scene_meshes(scenes, c: int, objects_dir: str | Path, supports: dict, meshes: dict[str, trimesh.Trimesh] | None = None
+                 ) -> list[trimesh.Trimesh]:
+    """World-frame meshes of configuration ``c``'s scene without the target: the support (table or shelf),
+    the base brick (Stacking) and the obstacles. ``meshes`` caches object meshes by name."""
+    cache = {} if meshes is None else meshes
+
+    def obj(name: str) -> trimesh.Trimesh:
+        if name not in cache:
+            cache[name] = trimesh.load(Path(objects_dir) / name / "mesh.obj", force="mesh", process=False)
+        return cache[name]
+
+    sname, spose = scenes.support(c)
+    skey = f"support:{sname}"
+    if skey not in cache:
+        cache[skey] = supports[sname].mesh()
+    out = [cache[skey].copy().apply_transform(pose_matrix(spose))]
+    base = scenes.base(c)
+    if base is not None:
+        out.append(obj(base[0]).copy().apply_transform(pose_matrix(base[1])))
+    for oname, opose in scenes.obstacles(c):
+        out.append(obj(oname).copy().apply_transform(pose_matrix(opose)))
+    return out
+
+
+class SceneCollider:
+    """Occupancy and depth queries against a set of closed world-frame meshes (open3d ray casting)."""
+
+    def __init__(self, meshes: list[trimesh.Trimesh]):
+        from tohgs.geometry.sdf import raycasting_scene
+
+        merged = trimesh.util.concatenate(meshes)
+        self.scene = raycasting_scene(merged.vertices, merged.faces)
+
+    def depth_inside(self, points: np.ndarray) -> np.ndarray:
+        """(N,) how deep each of (N, 3) points lies inside the meshes (0 outside), m."""
+        import open3d as o3d
+
+        pts = o3d.core.Tensor(np.ascontiguousarray(points, dtype=np.float32))
+        inside = self.scene.compute_occupancy(pts).numpy() > 0.5
+        depth = np.zeros(len(points))
+        if inside.any():
+            sub = o3d.core.Tensor(np.ascontiguousarray(np.asarray(points)[inside], dtype=np.float32))
+            depth[inside] = self.scene.compute_distance(sub).numpy()
+        return depth
+
+
+@dataclass(frozen=True)
+class ExpansionSettings:
+    """``tolerance``: largest depth of a hand vertex inside a scene mesh that is not a collision, m."""
+
+    tolerance: float = 0.002
+
+
+def collision_free(hand_vertices: np.ndarray, collider: SceneCollider, tolerance: float) -> np.ndarray:
+    """(B,) bool: hands ((B, V, 3) world frame) with no vertex deeper than ``tolerance`` in the scene."""
+    b, v, _ = hand_vertices.shape
+    depth = collider.depth_inside(hand_vertices.reshape(-1, 3)).reshape(b, v)
+    return depth.max(1) <= tolerance
+
+
+def expand_configurations(scenes, prior_pose: np.ndarray, hand: HandModel, objects_dir: str | Path, supports: dict,
+                          settings: ExpansionSettings) -> dict[str, np.ndarray]:
+    """Task grasps of every configuration of one scene set.
+
+    Args:
+        scenes: a :class:`~tohgs.data.scenes.SceneSet`.
+        prior_pose: (A, 51) accepted prior grasps in the target's mesh frame.
+        hand: the hand model.
+        objects_dir: the objects stage's folder.
+        supports: the supports by name.
+        settings: the collision tolerance.
+
+    Returns:
+        ``config`` (K,), ``prior_index`` (K,), ``grasp_init`` and ``grasp_goal`` (K, 51) world-frame grasp
+        vectors, and ``kept_per_config`` (C,).
+    """
+    if len(prior_pose) == 0:
+        log.warning("%s %s: no accepted prior grasp, so no task grasp", scenes.task, scenes.object)
+        return {"config": np.zeros(0, np.int32), "prior_index": np.zeros(0, np.int32),
+                "grasp_init": np.zeros((0, 51), np.float32), "grasp_goal": np.zeros((0, 51), np.float32),
+                "kept_per_config": np.zeros(len(scenes), np.int64)}
+    with torch.no_grad():
+        local = hand(torch.as_tensor(prior_pose, dtype=hand.rest_vertices.dtype)).vertices.cpu().numpy().astype(np.float64)
+    wrist = hand.rest_joints[0].cpu().numpy().astype(np.float64)
+    cache: dict[str, trimesh.Trimesh] = {}
+    rows: dict[str, list] = {"config": [], "prior_index": [], "grasp_init": [], "grasp_goal": []}
+    kept = np.zeros(len(scenes), dtype=np.int64)
+    for c in range(len(scenes)):
+        collider = SceneCollider(scene_meshes(scenes, c, objects_dir, supports, cache))
+        ok = np.ones(len(local), dtype=bool)
+        for pose in (scenes.target_init_pose[c], scenes.target_goal_pose[c]):
+            T = pose_matrix(pose)
+            world = local @ T[:3, :3].T + T[:3, 3]
+            ok &= collision_free(world, collider, settings.tolerance)
+        idx = np.flatnonzero(ok)
+        kept[c] = len(idx)
+        rows["config"] += [c] * len(idx)
+        rows["prior_index"] += idx.tolist()
+        rows["grasp_init"].append(transform_grasp(prior_pose[idx], pose_matrix(scenes.target_init_pose[c]), wrist))
+        rows["grasp_goal"].append(transform_grasp(prior_pose[idx], pose_matrix(scenes.target_goal_pose[c]), wrist))
+        log.info("%s %s configuration %d: %d of %d grasps kept", scenes.task, scenes.object, c, len(idx), len(local))
+    return {"config": np.asarray(rows["config"], dtype=np.int32),
+            "prior_index": np.asarray(rows["prior_index"], dtype=np.int32),
+            "grasp_init": np.concatenate(rows["grasp_init"]).astype(np.float32) if rows["grasp_init"] else np.zeros((0, 51), np.float32),
+            "grasp_goal": np.concatenate(rows["grasp_goal"]).astype(np.float32) if rows["grasp_goal"] else np.zeros((0, 51), np.float32),
+            "kept_per_config": kept}
+
+
+def make_task_grasps(scene_store: str | Path, prior_store: str | Path, objects_dir: str | Path,
+                     supports_json: str | Path, hand: HandModel, settings: dict, out: str | Path) -> dict[str, np.ndarray]:
+    """The task grasps of one task and target object: expand its accepted prior grasps over its scene
+    configurations and write ``out`` (:mod:`tohgs.data.task_grasps`)."""
+    from tohgs.assets.supports import read_supports
+    from tohgs.data.grasps import read_prior_grasps
+    from tohgs.data.scenes import read_scenes
+    from tohgs.data.task_grasps import write_task_grasps
+
+    scenes = read_scenes(scene_store)
+    prior = read_prior_grasps(prior_store, filtered=True)
+    if prior.object != scenes.object:
+        raise ValueError(f"{prior_store} holds grasps of {prior.object}, but {scene_store} is about {scenes.object}")
+    s = ExpansionSettings(**settings)
+    accepted = prior.pose[prior.passed]
+    out_arrays = expand_configurations(scenes, accepted, hand, objects_dir, read_supports(supports_json), s)
+    out_arrays["prior_index"] = np.flatnonzero(prior.passed)[out_arrays["prior_index"]].astype(np.int32)
+    kept = out_arrays["kept_per_config"]
+    log.info("%s %s: %d accepted prior grasps -> %d task grasps over %d configurations (per configuration: %s)",
+             scenes.task, scenes.object, len(accepted), int(kept.sum()), len(kept), kept.tolist())
+    write_task_grasps(out_arrays, {"task": scenes.task, "object": scenes.object, "n_prior_accepted": int(len(accepted)),
+                                   "config": {"tolerance": s.tolerance}}, out)
+    return out_arrays

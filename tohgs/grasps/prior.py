@@ -1,0 +1,214 @@
+"""The prior-grasp stage: synthesise grasps of one object, measure them, and filter them.
+
+Two steps, two workflow rules, so that a threshold change reruns only the cheap one:
+
+1. :func:`make_prior_grasps`: the object's SDF grid (content-addressed cache), the annealing optimiser
+   (:mod:`tohgs.grasps.synthesis`), then PV, SD and the contact distance of every grasp
+   (:mod:`tohgs.metrics.quality`) -> the raw store.
+2. :func:`filter_prior_grasps`: the filter's flags (:mod:`tohgs.grasps.filter`) -> the filtered store.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import time
+import zlib
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import trimesh
+
+from tohgs.data.grasps import ENERGY_TERMS, PriorGrasps, read_prior_grasps, write_prior_grasps
+from tohgs.geometry.sdf import SDFGrid
+from tohgs.grasps.filter import FilterThresholds, quality_flags, rejection_counts
+from tohgs.grasps.synthesis import SynthesisSettings, synthesize
+from tohgs.hand.model import HandModel
+from tohgs.metrics.quality import (DisplacementSimulator, SDSettings, contact_distance, palm_gravity,
+                                   penetration_volume, surface_voxels)
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SDFSettings:
+    """The object's signed-distance grid: ``spacing`` and ``padding`` beyond its bounds, m."""
+
+    spacing: float = 0.002
+    padding: float = 0.05
+
+
+def _from_dict(cls, values: dict[str, Any] | None):
+    """A frozen settings dataclass from a config mapping (lists become tuples); unknown keys raise."""
+    values = dict(values or {})
+    known = {f.name for f in fields(cls)}
+    unknown = set(values) - known
+    if unknown:
+        raise ValueError(f"{cls.__name__}: unknown settings {sorted(unknown)}")
+    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+
+
+def object_sdf(mesh: trimesh.Trimesh, settings: SDFSettings, cache_dir: str | Path | None = None) -> SDFGrid:
+    """The SDF grid of ``mesh``, cached under ``<cache_dir>/sdf/<sha256>.npz`` (keyed by the mesh's
+    vertices and faces and the settings)."""
+    h = hashlib.sha256()
+    h.update(np.ascontiguousarray(mesh.vertices, dtype=np.float64).tobytes())
+    h.update(np.ascontiguousarray(mesh.faces, dtype=np.int64).tobytes())
+    h.update(json.dumps(asdict(settings), sort_keys=True).encode())
+    path = Path(cache_dir) / "sdf" / f"{h.hexdigest()}.npz" if cache_dir is not None else None
+    if path is not None and path.is_file():
+        try:
+            return SDFGrid.load(path)
+        except ValueError as exc:
+            log.warning("ignoring unreadable cache entry %s (%s)", path, exc)
+    grid = SDFGrid.build(mesh, settings.spacing, settings.padding)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        grid.save(path)
+    return grid
+
+
+def object_seed(seed: int, name: str) -> int:
+    """The synthesis seed of one object: independent of the other objects and of the job order."""
+    return int(np.random.SeedSequence([int(seed), zlib.crc32(name.encode())]).generate_state(1)[0])
+
+
+def evaluate_grasps(hand: HandModel, pose: np.ndarray, mesh: trimesh.Trimesh, collision_obj: str | Path,
+                    sd_settings: SDSettings, voxel_pitch: float = 0.001, progress: bool = False
+                    ) -> dict[str, np.ndarray]:
+    """PV (m^3), SD (m) and contact distance (m) of (B, 51) grasps of one object in its mesh frame; SD's
+    gravity per grasp as ``sd_settings.gravity_direction`` says (:func:`palm_gravity` by default)."""
+    with torch.no_grad():
+        verts = hand(torch.as_tensor(pose, dtype=hand.rest_vertices.dtype)).vertices.cpu().numpy().astype(np.float64)
+    faces = hand.closed_faces.cpu().numpy()
+    pv = penetration_volume(verts, faces, surface_voxels(mesh, voxel_pitch), voxel_pitch)
+    cd = contact_distance(verts, mesh)
+    it = range(len(verts))
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(it, desc="SD", mininterval=5.0)
+    centre = np.asarray(mesh.vertices).mean(0)
+    if sd_settings.gravity_direction == "away_from_palm":
+        palm = verts[:, hand.contact_ids[-8:].cpu().numpy()].mean(1)  # the 8 palm candidates
+        gravity = palm_gravity(palm, centre, float(np.linalg.norm(sd_settings.gravity)))
+    elif sd_settings.gravity_direction == "fixed":
+        gravity = np.broadcast_to(np.asarray(sd_settings.gravity, dtype=np.float64), (len(verts), 3))
+    else:
+        raise ValueError(f"metrics.sd.gravity_direction must be 'away_from_palm' or 'fixed', not {sd_settings.gravity_direction!r}")
+    with DisplacementSimulator(collision_obj, centre, sd_settings) as sim:
+        sd = np.array([sim.displacement(verts[i], faces, gravity=gravity[i]) for i in it])
+    return {"pv": np.atleast_1d(pv), "sd": sd, "contact_distance": np.atleast_1d(cd)}
+
+
+def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, synthesis: dict[str, Any],
+                      sdf: dict[str, Any], sd: dict[str, Any], voxel_pitch: float, plane_direction: str,
+                      seed: int, out: str | Path, cache_dir: str | Path | None = None, threads: int = 1) -> PriorGrasps:
+    """Synthesise and measure the prior grasps of the object in ``object_dir``; write the raw store.
+
+    Args:
+        object_dir: the objects stage's folder (``mesh.obj``, ``collision.obj``, ``meta.json``).
+        hand: the hand model; ``hand_name`` is recorded.
+        synthesis, sdf, sd: config mappings of :class:`SynthesisSettings`, :class:`SDFSettings` and
+            :class:`~tohgs.metrics.quality.SDSettings`.
+        voxel_pitch: PV's voxel size, m.
+        plane_direction: ``"random"`` (objects) or ``"down"`` (bricks), see :func:`support_planes`.
+        seed: the global seed (combined with the object's name).
+        out: the raw store to write.
+        cache_dir: cache root for SDF grids (None: no cache).
+        threads: torch threads.
+    """
+    torch.set_num_threads(max(1, int(threads)))
+    object_dir = Path(object_dir)
+    name = object_dir.name
+    mesh_path = object_dir / "mesh.obj"
+    try:
+        mesh = trimesh.load(mesh_path, force="mesh", process=False)  # as written: merging would break seams
+    except Exception as exc:
+        raise ValueError(f"{mesh_path}: unreadable object mesh ({exc})") from exc
+    if not mesh.is_watertight:
+        raise ValueError(f"{mesh_path}: the object mesh is not watertight (SDF and PV need a closed surface)")
+    s_syn = _from_dict(SynthesisSettings, {**synthesis, "plane_direction": plane_direction})
+    s_sdf = _from_dict(SDFSettings, sdf)
+    s_sd = _from_dict(SDSettings, sd)
+    timing = {}
+    t0 = time.perf_counter()
+    grid = object_sdf(mesh, s_sdf, cache_dir)
+    timing["sdf"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    result = synthesize(hand, grid, mesh.vertices, s_syn, object_seed(seed, name), progress=True)
+    timing["synthesis"] = time.perf_counter() - t0
+    log.info("%s: %d grasps, mean energy %.3f -> %.3f in %.1f s", name, s_syn.batch, result.history[0],
+             result.history[-1], timing["synthesis"])
+    t0 = time.perf_counter()
+    pose = result.pose.cpu().numpy()
+    metrics = evaluate_grasps(hand, pose, mesh, object_dir / "collision.obj", s_sd, voxel_pitch, progress=True)
+    timing["metrics"] = time.perf_counter() - t0
+    log.info("%s: PV median %.2f cm^3, SD median %.2f cm, metrics in %.1f s", name,
+             float(np.median(metrics["pv"])) * 1e6, float(np.median(metrics["sd"])) * 100, timing["metrics"])
+    e = result.energies
+    grasps = PriorGrasps(
+        object=name, pose=pose, contact_idx=result.contact_idx.cpu().numpy(), plane=result.planes.cpu().numpy(),
+        energies={k: getattr(e, k).cpu().numpy() for k in ENERGY_TERMS}, **metrics,
+        attrs={"hand": hand_name, "seed": int(seed), "timing": timing, "history": result.history[:: max(1, len(result.history) // 100)],
+               "config": {"synthesis": asdict(s_syn), "sdf": asdict(s_sdf), "sd": asdict(s_sd), "voxel_pitch": voxel_pitch}})
+    write_prior_grasps(grasps, out)
+    return grasps
+
+
+def filter_prior_grasps(raw: str | Path, joint_limits: np.ndarray, thresholds: dict[str, Any], out: str | Path
+                        ) -> PriorGrasps:
+    """Apply the filter to a raw store and write the filtered store (the same grasps plus pass flags).
+
+    Args:
+        raw: the raw store of :func:`make_prior_grasps`.
+        joint_limits: (15, 3, 2) the hand's anatomical limits, radians.
+        thresholds: a config mapping of :class:`~tohgs.grasps.filter.FilterThresholds`.
+        out: the filtered store.
+    """
+    g = read_prior_grasps(raw, filtered=False)
+    t = _from_dict(FilterThresholds, thresholds)
+    flags = quality_flags(g.pv, g.sd, g.contact_distance, g.pose[:, 6:], joint_limits, g.energies["fc"],
+                          g.energies["dis"], g.energies["pen"], t)
+    counts = rejection_counts(flags)
+    log.info("%s: %d of %d grasps pass; rejected by check: %s", g.object, counts["passed"], len(g),
+             {k: v for k, v in counts.items() if k != "passed"})
+    g.flags = flags
+    g.attrs = {**g.attrs, "thresholds": asdict(t), "rejections": counts}
+    write_prior_grasps(g, out)
+    return g
+
+
+def summarize_prior_grasps(store_paths: list[str | Path], out_csv: str | Path, min_accepted: int = 16):
+    """One row per object: grasps, accepted, failures per check and timing; writes ``out_csv``.
+
+    Logs the totals, the acceptance rate per check and the share of objects with at least
+    ``min_accepted`` accepted grasps. Returns the table (a ``pandas.DataFrame``).
+    """
+    import pandas as pd
+
+    from tohgs.grasps.filter import CHECKS
+    from tohgs.io import atomic_path
+
+    rows = []
+    for p in store_paths:
+        g = read_prior_grasps(p, filtered=True)
+        timing = g.attrs.get("timing", {})
+        rows.append({"object": g.object, "grasps": len(g), "accepted": int(g.passed.sum()),
+                     **{f"fail_{c}": int((~g.flags[c]).sum()) for c in CHECKS},
+                     **{f"seconds_{k}": round(float(v), 2) for k, v in timing.items()}})
+    df = pd.DataFrame(rows)
+    with atomic_path(out_csv) as tmp:
+        df.to_csv(tmp, index=False)
+    if len(df):
+        n = int(df.grasps.sum())
+        log.info("%d objects, %d grasps, %d accepted (%.1f %%); objects with >= %d accepted: %d (%.0f %%)",
+                 len(df), n, int(df.accepted.sum()), 100 * df.accepted.sum() / n, min_accepted,
+                 int((df.accepted >= min_accepted).sum()), 100 * (df.accepted >= min_accepted).mean())
+        for c in CHECKS:
+            log.info("check %-8s passes %.1f %% of grasps", c, 100 * (1 - df[f"fail_{c}"].sum() / n))
+    return df

@@ -1,0 +1,1 @@
+"""Networks: PointNet++ and the two diffusers (ContactDiffuser, GraspDiffuser)."""

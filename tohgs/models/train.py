@@ -1,0 +1,233 @@
+"""Training of ContactDiffuser and GraspDiffuser on map shards: AdamW, cosine schedule with warm-up, EMA
+weights, a fixed seed, progress in the log, resumable.
+
+The checkpoint ``results/models/<task>/<model>.pt`` holds the EMA weights, the model and training
+config, the grasp normaliser (GraspDiffuser), the loss curve and the seconds spent. While training, a
+resume file ``<checkpoint>.resume`` is written every ``checkpoint_every`` steps (model, EMA, optimiser,
+schedule, RNG state and step); a restarted job continues from it, and it is removed at the end.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from tohgs.data.maps import MapDataset
+from tohgs.hand.model import HandModel
+from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
+from tohgs.models.diffusion import make_scheduler
+from tohgs.models.grasp_diffuser import LOSS_WEIGHTS, GraspDiffuser, GraspDiffuserConfig, grasp_losses, total_loss
+
+log = logging.getLogger(__name__)
+MODELS = ("contact_diffuser", "grasp_diffuser")
+
+
+@dataclass(frozen=True)
+class TrainSettings:
+    """Optimiser and schedule (the official code's: AdamW lr 5e-4, betas (0.95, 0.999), wd 1e-5, cosine
+    with 500 warm-up steps); ``steps`` replaces epochs so the budget is explicit."""
+
+    steps: int = 1000
+    batch: int = 16
+    lr: float = 5e-4
+    betas: tuple[float, float] = (0.95, 0.999)
+    weight_decay: float = 1e-5
+    warmup: int = 50
+    ema_decay: float = 0.999
+    rotation: str = "so3"
+    checkpoint_every: int = 200
+    log_every: int = 50
+    seed: int = 0
+    threads: int = 1
+    device: str = "auto"
+    train_points: int = 0  # a random subset of the N points per batch (0: all); the networks are per point
+
+
+def build_model(name: str, cfg: dict[str, Any]):
+    """A fresh model of ``name`` from its config mapping."""
+    if name == "contact_diffuser":
+        return ContactDiffuser(ContactDiffuserConfig.from_dict(cfg))
+    if name == "grasp_diffuser":
+        return GraspDiffuser(GraspDiffuserConfig.from_dict(cfg))
+    raise ValueError(f"unknown model {name!r} (expected one of {MODELS})")
+
+
+def pick_device(device: str) -> torch.device:
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(device)
+
+
+def _collate(items: list[dict[str, Any]], device: torch.device, keep: np.ndarray | None = None) -> dict[str, torch.Tensor]:
+    """Stack items into tensors; ``keep`` selects a subset of the points (the same for the whole batch)."""
+    out = {}
+    for k in ("points", "normals", "d_init", "d_goal", "grasp", "contact"):
+        a = np.stack([it[k] for it in items])
+        if keep is not None and k != "grasp":
+            a = a[:, keep]
+        out[k] = torch.as_tensor(a, dtype=torch.float32, device=device)
+    return out
+
+
+def training_step(name: str, model, batch: dict[str, torch.Tensor], sched, generator: torch.Generator,
+                  hand: HandModel | None, weights: tuple[float, float, float, float], alpha_contact: float
+                  ) -> dict[str, torch.Tensor]:
+    """One step's losses (``"loss"`` is what is optimised)."""
+    b = batch["points"].shape[0]
+    dev = batch["points"].device
+    t = torch.randint(0, sched.config.num_train_timesteps, (b,), generator=generator).to(dev)
+    if name == "contact_diffuser":
+        x0 = 2 * batch["contact"] - 1
+        noise = torch.randn(x0.shape, generator=generator).to(dev)
+        x_t = sched.add_noise(x0, noise, t)
+        cond = model.condition(batch["points"], batch["normals"], batch["d_init"], batch["d_goal"])
+        loss = torch.nn.functional.mse_loss(model(x_t, t, cond), noise)
+        return {"loss": loss}
+    x0 = model.normalise(batch["grasp"])
+    noise = torch.randn(x0.shape, generator=generator).to(dev)
+    x_t = sched.add_noise(x0, noise, t)
+    cond = model.condition(batch["points"], batch["normals"], batch["contact"])
+    x0_hat = model(x_t, t, cond)
+    terms = grasp_losses(model, hand, x0_hat, x0, batch["points"], batch["contact"], alpha_contact)
+    return {"loss": total_loss(terms, weights), **terms}
+
+
+def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: dict[str, Any], settings: dict[str, Any],
+                out: str | Path, hand: HandModel | None = None, curve_png: str | Path | None = None) -> dict[str, Any]:
+    """Train ``name`` for ``task`` on the training shards and write the checkpoint ``out``.
+
+    Returns the checkpoint dict.
+    """
+    from diffusers.optimization import get_cosine_schedule_with_warmup
+    from diffusers.training_utils import EMAModel
+
+    s = TrainSettings(**{k: tuple(v) if isinstance(v, list) else v for k, v in settings.items()})
+    torch.set_num_threads(max(1, s.threads))
+    device = pick_device(s.device)
+    torch.manual_seed(s.seed)
+    data = MapDataset(shard_paths, per="grasp", rotation=s.rotation, seed=s.seed)
+    if len(data) == 0:
+        raise ValueError(f"{task}/{name}: the training shards {list(map(str, shard_paths))} hold no task grasps")
+    model = build_model(name, model_cfg).to(device)
+    alpha_contact = float(data.shards[0].attrs.get("alpha_contact", 100.0))
+    if name == "grasp_diffuser":
+        if hand is None:
+            raise ValueError("GraspDiffuser trains with the hand model in the loss; pass hand=")
+        hand = hand.to(device)
+        model.set_normaliser(torch.as_tensor(np.concatenate([sh.grasp for sh in data.shards]), device=device))
+    sched = make_scheduler(model.diffusion, "ddpm")
+    opt = torch.optim.AdamW(model.parameters(), lr=s.lr, betas=s.betas, weight_decay=s.weight_decay)
+    lr_sched = get_cosine_schedule_with_warmup(opt, s.warmup, s.steps)
+    ema = EMAModel(model.parameters(), decay=s.ema_decay)
+    gen = torch.Generator().manual_seed(s.seed)
+    order_rng = np.random.default_rng(s.seed)
+    curve: list[dict[str, float]] = []
+    step, spent = 0, 0.0
+    resume = Path(str(out) + ".resume")
+    if resume.is_file():
+        state = torch.load(resume, map_location=device, weights_only=False)
+        model.load_state_dict(state["model"])
+        ema.load_state_dict(state["ema"])
+        opt.load_state_dict(state["opt"])
+        lr_sched.load_state_dict(state["lr_sched"])
+        gen.set_state(state["gen"])
+        order_rng.bit_generator.state = state["order_rng"]
+        step, curve, spent = state["step"], state["curve"], state["spent"]
+        log.info("%s/%s: resuming at step %d from %s", task, name, step, resume)
+    weights = LOSS_WEIGHTS.get(task, LOSS_WEIGHTS["placing"])
+    n_params = sum(p.numel() for p in model.parameters())
+    log.info("%s/%s: %d parameters, %d training grasps, %d steps of batch %d on %s", task, name, n_params, len(data),
+             s.steps, s.batch, device)
+    t0 = time.perf_counter()
+    running: dict[str, float] = {}
+    model.train()
+    while step < s.steps:
+        idx = order_rng.integers(0, len(data), s.batch)
+        n_pts = data.shards[0].points.shape[1]
+        keep = order_rng.permutation(n_pts)[: s.train_points] if 0 < s.train_points < n_pts else None
+        batch = _collate([data[int(i)] for i in idx], device, keep)
+        losses = training_step(name, model, batch, sched, gen, hand, weights, alpha_contact)
+        opt.zero_grad(set_to_none=True)
+        losses["loss"].backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+        opt.step()
+        lr_sched.step()
+        ema.step(model.parameters())
+        step += 1
+        for k, v in losses.items():
+            running[k] = running.get(k, 0.0) + float(v.detach())
+        if step % s.log_every == 0 or step == s.steps:
+            n = s.log_every if step % s.log_every == 0 else step % s.log_every
+            row = {"step": step, **{k: v / n for k, v in running.items()}, "lr": lr_sched.get_last_lr()[0]}
+            curve.append(row)
+            running = {}
+            log.info("%s/%s step %d/%d: %s", task, name, step, s.steps,
+                     ", ".join(f"{k} {v:.4g}" for k, v in row.items() if k != "step"))
+        if step % s.checkpoint_every == 0 and step < s.steps:
+            from tohgs.io import atomic_path
+
+            with atomic_path(resume) as tmp:
+                torch.save({"model": model.state_dict(), "ema": ema.state_dict(), "opt": opt.state_dict(),
+                            "lr_sched": lr_sched.state_dict(), "gen": gen.get_state(),
+                            "order_rng": order_rng.bit_generator.state, "step": step, "curve": curve,
+                            "spent": spent + time.perf_counter() - t0}, tmp)
+    spent += time.perf_counter() - t0
+    ema.copy_to(model.parameters())
+    ckpt = {"name": name, "task": task, "model_config": model_cfg, "train_settings": asdict(s),
+            "state_dict": {k: v.cpu() for k, v in model.state_dict().items()}, "loss_curve": curve,
+            "seconds": spent, "n_parameters": n_params, "n_train_grasps": len(data),
+            "alpha_contact": alpha_contact, "hand_wrist": data.shards[0].attrs["hand_wrist"]}
+    from tohgs.io import atomic_path
+
+    with atomic_path(out) as tmp:
+        torch.save(ckpt, tmp)
+    resume.unlink(missing_ok=True)
+    if curve_png is not None:
+        plot_curve(curve, f"{task} / {name}", curve_png)
+    log.info("%s/%s: trained in %.1f s, final loss %.4g", task, name, spent, curve[-1]["loss"] if curve else float("nan"))
+    return ckpt
+
+
+def load_model(path: str | Path, device: str | torch.device = "cpu"):
+    """The model of a checkpoint (EMA weights, eval mode) and the checkpoint dict."""
+    path = Path(path)
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as exc:
+        raise ValueError(f"{path}: not a readable checkpoint ({exc})") from exc
+    for key in ("name", "model_config", "state_dict"):
+        if key not in ckpt:
+            raise ValueError(f"{path}: not a tohgs checkpoint (no '{key}')")
+    model = build_model(ckpt["name"], ckpt["model_config"])
+    model.load_state_dict(ckpt["state_dict"])
+    return model.to(device).eval(), ckpt
+
+
+def plot_curve(curve: list[dict[str, float]], title: str, out_png: str | Path) -> None:
+    """Training loss curve (and the grasp loss terms) as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from tohgs.io import atomic_path
+
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    steps = [r["step"] for r in curve]
+    for key in [k for k in (curve[0] if curve else {}) if k not in ("step", "lr")]:
+        ax.plot(steps, [r[key] for r in curve], label=key)
+    ax.set_yscale("log")
+    ax.set_xlabel("step")
+    ax.set_ylabel("loss")
+    ax.set_title(title)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    with atomic_path(out_png) as tmp:
+        fig.savefig(tmp, dpi=90, format="png")
+    plt.close(fig)

@@ -1,0 +1,78 @@
+# The task-oriented dataset: task expansion per task and object, then distance and contact maps in
+# Zarr shards per task, split and shard (independent jobs), a summary and a picture.
+
+
+rule task_grasps:
+    input:
+        scenes="results/scenes/{task}/{object}.zarr",
+        prior="results/grasps/prior/{object}.zarr",
+        objects=object_dirs(),
+        supports="results/objects/supports",
+        hand="results/hand/hand.npz",
+        code=code("grasps/expand", "geometry/sdf", "data/task_grasps", "data/store", "data/scenes", "data/grasps"),
+    output:
+        directory("results/grasps/task/{task}/{object}.zarr"),
+    params:
+        settings=setting("task_grasps"),
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/grasps/task/{task}/{object}.log",
+    script:
+        "../scripts/task_grasps.py"
+
+
+rule maps:
+    input:
+        scenes=split_scene_stores,
+        grasps=split_task_grasps,
+        objects=object_dirs(),
+        supports="results/objects/supports",
+        hand="results/hand/hand.npz",
+        code=code("data/build_maps", "data/maps", "data/store", "geometry/maps", "grasps/expand", "data/scenes", "data/task_grasps"),
+    output:
+        directory("results/maps/{task}/{split}/shard-{shard}.zarr"),
+    params:
+        objects=split_objects,
+        settings=setting("maps", "points"),
+        n_shards=lambda w: config["maps"]["shards"][w.split],
+        test_configs=setting("maps", "test_configs"),
+        seed=setting("seed"),
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/maps/{task}/{split}/shard-{shard}.log",
+    benchmark:
+        "results/benchmarks/maps/{task}/{split}/shard-{shard}.tsv"
+    script:
+        "../scripts/maps.py"
+
+
+rule dataset_summary:
+    input:
+        task_grasps=all_task_grasps,
+        shards=all_map_shards,
+        code=code("data/maps", "data/task_grasps", "data/store"),
+    output:
+        "results/maps/summary.csv",
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/maps/summary.log",
+    script:
+        "../scripts/dataset_summary.py"
+
+
+rule maps_figure:
+    input:
+        shards=all_map_shards,
+        hand="results/hand/hand.npz",
+        code=code("viz/maps", "viz/render", "data/maps", "data/store"),
+    output:
+        report("results/figures/maps.png", caption="../report/maps.rst", category="Dataset"),
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/figures/maps.log",
+    script:
+        "../scripts/maps_figure.py"

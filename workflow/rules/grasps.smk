@@ -1,0 +1,78 @@
+# The prior-grasp stage: force-closure synthesis and metrics per object (expensive), then the filter
+# (cheap, so a threshold change reruns only it), a per-object summary and a picture.
+
+
+rule prior_synthesis:
+    input:
+        object="results/objects/{object}",
+        hand="results/hand/hand.npz",
+        code=code("grasps/synthesis", "grasps/filter", "grasps/prior", "geometry/sdf", "metrics/quality", "data/grasps"),
+    output:
+        directory("results/grasps/prior/raw/{object}.zarr"),
+    params:
+        synthesis=setting("prior_grasps", "synthesis"),
+        sdf=setting("prior_grasps", "sdf"),
+        sd=setting("metrics", "sd"),
+        voxel_pitch=setting("metrics", "voxel_pitch"),
+        plane_direction=plane_direction,
+        hand_model=setting("hand", "model"),
+        seed=setting("seed"),
+        cache_dir=setting("cache_dir"),
+    threads: config["prior_grasps"]["threads"]
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/grasps/prior_synthesis/{object}.log",
+    benchmark:
+        "results/benchmarks/grasps/prior_synthesis/{object}.tsv"
+    script:
+        "../scripts/prior_synthesis.py"
+
+
+rule prior_filter:
+    input:
+        raw="results/grasps/prior/raw/{object}.zarr",
+        hand="results/hand/hand.npz",
+        code=code("grasps/filter", "grasps/prior", "data/grasps"),
+    output:
+        directory("results/grasps/prior/{object}.zarr"),
+    params:
+        thresholds=setting("prior_grasps", "filter"),
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/grasps/prior_filter/{object}.log",
+    script:
+        "../scripts/prior_filter.py"
+
+
+rule prior_summary:
+    input:
+        stores=prior_stores,
+        code=code("grasps/prior", "data/grasps"),
+    output:
+        "results/grasps/prior/summary.csv",
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/grasps/prior_summary.log",
+    script:
+        "../scripts/prior_summary.py"
+
+
+rule prior_figure:
+    input:
+        stores=prior_stores,
+        catalog="results/objects/catalog.csv",
+        hand="results/hand/hand.npz",
+        code=code("viz/grasps", "viz/render", "data/grasps"),
+    output:
+        report("results/figures/prior_grasps.png", caption="../report/prior_grasps.rst", category="Prior grasps"),
+    params:
+        n_objects=setting("figures", "prior_objects"),
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/figures/prior_grasps.log",
+    script:
+        "../scripts/prior_figure.py"

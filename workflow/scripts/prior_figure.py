@@ -1,0 +1,12 @@
+"""Snakemake script of rule prior_figure: accepted and rejected prior grasps on several objects."""
+from tohgs.io import setup_logging
+
+setup_logging(snakemake.log[0])
+
+from pathlib import Path  # noqa: E402
+
+from tohgs.hand import HandAssets, HandModel  # noqa: E402
+from tohgs.viz.grasps import plot_prior_grasps  # noqa: E402
+
+plot_prior_grasps(snakemake.input.stores, Path(snakemake.input.catalog).parent, HandModel(HandAssets.load(snakemake.input.hand)),
+                  snakemake.output[0], snakemake.params.n_objects)
