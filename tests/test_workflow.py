@@ -149,7 +149,14 @@ def _n_scenes(smoke_run) -> int:
 
 N_MAPS = 9  # 3 tasks x (1 train + 1 val + 1 test) shards in the smoke config
 MODELS = {"train": 6, "predict": 6}  # 3 tasks x 2 models; 3 tasks x 2 methods (ours, ours-gt-contact)
-DATASET = {"maps": N_MAPS, "dataset_summary": 1, "maps_figure": 1, **MODELS}
+
+
+def _downstream(n_maps: int) -> dict[str, int]:
+    """``n_maps`` map shards and everything built from them."""
+    return {"maps": n_maps, "dataset_summary": 1, "maps_figure": 1, **MODELS}
+
+
+DATASET = _downstream(N_MAPS)
 # Jobs with fixed output names behind the catalog checkpoint: listed in a dry run before it reruns.
 AFTER_CATALOG = {"prior_summary": 1, "prior_figure": 1, **DATASET}
 
@@ -158,11 +165,23 @@ def _n_task_grasps(smoke_run) -> int:
     return len(list((smoke_run / "results/grasps/task").glob("*/*.zarr")))
 
 
-def _prior(n: int, n_task: int, synthesis: bool = True) -> dict[str, int]:
+def _fed_shards(smoke_run, tasks=("placing", "stacking", "shelving")) -> int:
+    """Map shards whose split has objects (a shard of an empty split reads no scene or grasp store, so
+    upstream changes do not reach it)."""
+    from tohgs.assets.sources import task_set
+
+    cfg = yaml.safe_load((smoke_run / ".test/config/config.yaml").read_text())
+    cat = pd.read_csv(smoke_run / "results/objects/catalog.csv", keep_default_na=False)
+    cat = cat[cat.status == "ok"]
+    return sum(n for task in tasks for split, n in cfg["maps"]["shards"].items()
+               if ((cat.task_set == task_set(task)) & (cat.split == split)).any())
+
+
+def _prior(n: int, n_task: int, n_maps: int, synthesis: bool = True) -> dict[str, int]:
     """The prior-grasp jobs of ``n`` objects (synthesis optional, filter, summary, figure) and everything
-    built from them: ``n_task`` task-grasp jobs, the map shards, their summary and figure."""
+    built from them: ``n_task`` task-grasp jobs, ``n_maps`` map shards, their summary, figure and models."""
     return {**({"prior_synthesis": n} if synthesis else {}), "prior_filter": n, "task_grasps": n_task,
-            **AFTER_CATALOG}
+            "prior_summary": 1, "prior_figure": 1, **_downstream(n_maps)}
 
 
 def test_editing_code_makes_exactly_its_stage_stale(smoke_run):
@@ -172,6 +191,7 @@ def test_editing_code_makes_exactly_its_stage_stale(smoke_run):
     n_scenes = _n_scenes(smoke_run)
     n_prior = len(list((smoke_run / "results/grasps/prior").glob("*.zarr")))
     n_task = _n_task_grasps(smoke_run)
+    fed = _fed_shards(smoke_run)
     time.sleep(1.0)
     os.utime(smoke_run / "tohgs/assets/mesh.py")
     assert _stale_jobs(smoke_run) == {}
@@ -185,15 +205,16 @@ def test_editing_code_makes_exactly_its_stage_stale(smoke_run):
                                           "prior_figure": 1, "maps_figure": 1}
     with _edited(smoke_run / "tohgs/sim/world.py"):
         assert _stale_jobs(smoke_run) == {"all": 1, "scenes": n_scenes, "scenes_figure": 3, "task_grasps": n_task,
-                                          **DATASET}
+                                          **_downstream(fed)}
     with _edited(smoke_run / "tohgs/geometry/maps.py"):
         assert _stale_jobs(smoke_run) == {"all": 1, **DATASET}
     with _edited(smoke_run / "tohgs/hand/model.py"):
-        assert _stale_jobs(smoke_run) == {"all": 1, "hand_model": 1, "hand_figure": 1, **_prior(n_prior, n_task)}
+        assert _stale_jobs(smoke_run) == {"all": 1, "hand_model": 1, "hand_figure": 1,
+                                          **_prior(n_prior, n_task, N_MAPS)}  # every shard reads the hand
     with _edited(smoke_run / "tohgs/grasps/synthesis.py"):
-        assert _stale_jobs(smoke_run) == {"all": 1, **_prior(n_prior, n_task)}
-    with _edited(smoke_run / "tohgs/grasps/filter.py"):
-        assert _stale_jobs(smoke_run) == {"all": 1, **_prior(n_prior, n_task, synthesis=False)}
+        assert _stale_jobs(smoke_run) == {"all": 1, **_prior(n_prior, n_task, fed)}
+    with _edited(smoke_run / "tohgs/grasps/filter.py"):  # the synthesis job imports it too (tohgs.grasps.prior)
+        assert _stale_jobs(smoke_run) == {"all": 1, **_prior(n_prior, n_task, fed)}
     assert _stale_jobs(smoke_run) == {}
 
 
@@ -222,12 +243,14 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
     assert stale_with(("objects.split.bricks", {"test": 0.5, "val": 0.0})) == {
         "all": 1, "catalog": 1, "objects_figure": 1, "scenes_figure": 3, **AFTER_CATALOG}
     n_task = _n_task_grasps(smoke_run)
-    assert stale_with(("objects.supports.table", [1.2, 0.8, 0.05])) == {
-        "all": 1, "supports": 1, "scenes": _n_scenes(smoke_run), "scenes_figure": 3, "task_grasps": n_task, **DATASET}
+    fed = _fed_shards(smoke_run)
+    assert stale_with(("objects.supports.table", [1.2, 0.8, 0.05])) == {  # every shard reads the supports
+        "all": 1, "supports": 1, "scenes": _n_scenes(smoke_run), "scenes_figure": 3, "task_grasps": n_task,
+        **DATASET}
     stacking = dict(cfg["scenes"]["stacking"], max_offset=0.005)
     assert stale_with(("scenes.stacking", stacking)) == {"all": 1, "scenes": n_stacking, "scenes_figure": 1,
-                                                         "task_grasps": n_stacking, "maps": 3, "dataset_summary": 1,
-                                                         "maps_figure": 1, "train": 2, "predict": 2}
+                                                         "task_grasps": n_stacking, "maps": _fed_shards(smoke_run, ("stacking",)),
+                                                         "dataset_summary": 1, "maps_figure": 1, "train": 2, "predict": 2}
     # A hand setting concerns the hand only (a MANO file needs a path that exists).
     (smoke_run / "MANO_RIGHT.pkl").write_bytes(b"")
     changed = yaml.safe_load(yaml.safe_dump(cfg))
@@ -236,14 +259,14 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
     n_prior = len(list((smoke_run / "results/grasps/prior").glob("*.zarr")))
     n_task = _n_task_grasps(smoke_run)
     assert _stale_jobs(smoke_run, configfile="changed.yaml") == {"all": 1, "hand_model": 1, "hand_figure": 1,
-                                                                  **_prior(n_prior, n_task)}
+                                                                  **_prior(n_prior, n_task, N_MAPS)}
     # A filter threshold reruns only the filter (and what reads it); a synthesis setting the synthesis.
     assert stale_with(("prior_grasps.filter", dict(cfg["prior_grasps"]["filter"], max_sd=0.02))) == {
-        "all": 1, **_prior(n_prior, n_task, synthesis=False)}
+        "all": 1, **_prior(n_prior, n_task, fed, synthesis=False)}
     assert stale_with(("prior_grasps.synthesis", dict(cfg["prior_grasps"]["synthesis"], w_prior=0.4))) == {
-        "all": 1, **_prior(n_prior, n_task)}
-    # The expansion tolerance: the task grasps and the maps; a map size: the maps only.
-    assert stale_with(("task_grasps.tolerance", 0.003)) == {"all": 1, "task_grasps": n_task, **DATASET}
+        "all": 1, **_prior(n_prior, n_task, fed)}
+    # The expansion tolerance: the task grasps and the maps fed by them; a map size: every shard.
+    assert stale_with(("task_grasps.tolerance", 0.003)) == {"all": 1, "task_grasps": n_task, **_downstream(fed)}
     assert stale_with(("maps.points", dict(cfg["maps"]["points"], n_points=96))) == {"all": 1, **DATASET}
     # A ContactDiffuser size: its three trainings and the predictions that sample from it (not ours-gt-contact);
     # a sampling setting: the predictions only.
