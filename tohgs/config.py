@@ -151,3 +151,15 @@ def _deep_update(dst: dict[str, Any], src: Mapping[str, Any]) -> None:
             _deep_update(dst[k], v)
         else:
             dst[k] = copy.deepcopy(v)
+
+
+def settings_from(cls, values: Mapping[str, Any] | None):
+    """An instance of the frozen settings dataclass ``cls`` from a config mapping: YAML lists become
+    tuples; a key ``cls`` does not have raises ``ValueError`` naming it."""
+    import dataclasses
+
+    values = dict(values or {})
+    unknown = set(values) - {f.name for f in dataclasses.fields(cls)}
+    if unknown:
+        raise ValueError(f"{cls.__name__}: unknown settings {sorted(unknown)}")
+    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})

@@ -15,7 +15,7 @@ import json
 import logging
 import time
 import zlib
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +23,7 @@ import numpy as np
 import torch
 import trimesh
 
+from tohgs.config import settings_from
 from tohgs.data.grasps import ENERGY_TERMS, PriorGrasps, read_prior_grasps, write_prior_grasps
 from tohgs.geometry.sdf import SDFGrid
 from tohgs.grasps.filter import FilterThresholds, quality_flags, rejection_counts
@@ -40,16 +41,6 @@ class SDFSettings:
 
     spacing: float = 0.002
     padding: float = 0.05
-
-
-def _from_dict(cls, values: dict[str, Any] | None):
-    """A frozen settings dataclass from a config mapping (lists become tuples); unknown keys raise."""
-    values = dict(values or {})
-    known = {f.name for f in fields(cls)}
-    unknown = set(values) - known
-    if unknown:
-        raise ValueError(f"{cls.__name__}: unknown settings {sorted(unknown)}")
-    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
 
 
 def object_sdf(mesh: trimesh.Trimesh, settings: SDFSettings, cache_dir: str | Path | None = None) -> SDFGrid:
@@ -132,9 +123,9 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
         raise ValueError(f"{mesh_path}: unreadable object mesh ({exc})") from exc
     if not mesh.is_watertight:
         raise ValueError(f"{mesh_path}: the object mesh is not watertight (SDF and PV need a closed surface)")
-    s_syn = _from_dict(SynthesisSettings, {**synthesis, "plane_direction": plane_direction})
-    s_sdf = _from_dict(SDFSettings, sdf)
-    s_sd = _from_dict(SDSettings, sd)
+    s_syn = settings_from(SynthesisSettings, {**synthesis, "plane_direction": plane_direction})
+    s_sdf = settings_from(SDFSettings, sdf)
+    s_sd = settings_from(SDSettings, sd)
     timing = {}
     t0 = time.perf_counter()
     grid = object_sdf(mesh, s_sdf, cache_dir)
@@ -171,7 +162,7 @@ def filter_prior_grasps(raw: str | Path, joint_limits: np.ndarray, thresholds: d
         out: the filtered store.
     """
     g = read_prior_grasps(raw, filtered=False)
-    t = _from_dict(FilterThresholds, thresholds)
+    t = settings_from(FilterThresholds, thresholds)
     flags = quality_flags(g.pv, g.sd, g.contact_distance, g.pose[:, 6:], joint_limits, g.energies["fc"],
                           g.energies["dis"], g.energies["pen"], t)
     counts = rejection_counts(flags)

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from tohgs.config import settings_from
 from tohgs.data.maps import MapDataset
 from tohgs.hand.model import HandModel
 from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
@@ -107,7 +108,7 @@ def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: 
     from diffusers.optimization import get_cosine_schedule_with_warmup
     from diffusers.training_utils import EMAModel
 
-    s = TrainSettings(**{k: tuple(v) if isinstance(v, list) else v for k, v in settings.items()})
+    s = settings_from(TrainSettings, settings)
     torch.set_num_threads(max(1, s.threads))
     device = pick_device(s.device)
     torch.manual_seed(s.seed)

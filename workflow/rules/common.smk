@@ -26,11 +26,12 @@ OBJECT_NAME = "(pb|brick|dir)-[a-z0-9-]+"  # the {object} wildcard (see tohgs.as
 
 def code(*modules):
     """The tohgs source files a job runs: packages ("sim": all its modules) or single modules
-    ("data/scenes"). They are the job's code inputs, so an edit makes it stale."""
+    ("data/scenes", "config"). They are the job's code inputs, so an edit makes it stale."""
     files = []
     for name in modules:
         path = REPO / "tohgs" / name
-        files += [path.with_suffix(".py")] if len(Path(name).parts) > 1 else sorted(path.glob("*.py"))
+        single = path.with_suffix(".py")
+        files += [single] if single.is_file() else sorted(path.glob("*.py"))
     return [os.path.relpath(f) for f in files]
 
 

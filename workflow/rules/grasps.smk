@@ -6,7 +6,7 @@ rule prior_synthesis:
     input:
         object="results/objects/{object}",
         hand="results/hand/hand.npz",
-        code=code("grasps/synthesis", "grasps/filter", "grasps/prior", "geometry/sdf", "metrics/quality", "data/grasps"),
+        code=code("grasps/synthesis", "grasps/filter", "grasps/prior", "geometry/sdf", "metrics/quality", "data/grasps", "config"),
     output:
         directory("results/grasps/prior/raw/{object}.zarr"),
     params:
@@ -33,7 +33,7 @@ rule prior_filter:
     input:
         raw="results/grasps/prior/raw/{object}.zarr",
         hand="results/hand/hand.npz",
-        code=code("grasps/filter", "grasps/prior", "data/grasps"),
+        code=code("grasps/filter", "grasps/prior", "data/grasps", "config"),
     output:
         directory("results/grasps/prior/{object}.zarr"),
     params:

@@ -5,7 +5,7 @@ rule train:
     input:
         shards=train_shards,
         hand="results/hand/hand.npz",
-        code=code("models", "data/maps", "data/store", "grasps/expand"),
+        code=code("models", "data/maps", "data/store", "grasps/expand", "config"),
     output:
         model="results/models/{task}/{model}.pt",
         curve=report("results/models/{task}/{model}.png", caption="../report/training.rst", category="Training"),
