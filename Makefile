@@ -9,7 +9,7 @@ PY := $(VENV)/bin/python
 SNAKEMAKE := $(PY) -m snakemake
 STAMP := $(VENV)/.tohgs-setup
 
-.PHONY: reproduce test setup lint dryrun benchmark clean
+.PHONY: reproduce test setup lint dryrun benchmark report clean
 
 reproduce: $(STAMP)
 	$(SNAKEMAKE) --cores $(CORES) $(TARGET)
@@ -37,6 +37,10 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q -e ".[test]"
 	@$(PY) -c "import tohgs, torch, open3d, pybullet, coacd, snakemake, diffusers; print('tohgs environment ready: torch', torch.__version__)"
 	@touch $@
+
+# the HTML report of a finished run: tables and figures with their captions (workflow/report/)
+report: $(STAMP)
+	$(SNAKEMAKE) --report results/report.html $(TARGET)
 
 benchmark: $(STAMP)
 	$(PY) benchmarks/bench_objects.py

@@ -15,7 +15,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 import torch
 import yaml
 
@@ -45,7 +44,7 @@ def main() -> None:
             raw = make_prior_grasps(obj, hand, "anny", pg["synthesis"], pg["sdf"], metrics["sd"], metrics["voxel_pitch"],
                                     "down" if name.startswith("brick-") else "random", cfg["seed"], Path(tmp) / f"{name}.zarr",
                                     cache_dir=None)
-            kept = filter_prior_grasps(Path(tmp) / f"{name}.zarr", hand.assets.joint_limits, pg["filter"],
+            kept = filter_prior_grasps(Path(tmp) / f"{name}.zarr", pg["filter"],
                                        Path(tmp) / f"{name}-f.zarr")
             cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
             t = raw.attrs["timing"]

@@ -16,7 +16,7 @@ from tohgs.data.build_maps import make_map_shard, shard_items
 from tohgs.data.maps import MapDataset, read_map_shard
 from tohgs.data.scenes import write_scenes
 from tohgs.data.task_grasps import write_task_grasps
-from tohgs.geometry.maps import (farthest_point_sampling, nearest_distance, nearest_distance_brute, normalised_map,
+from tohgs.geometry.maps import (farthest_point_sampling, farthest_point_sampling_reference, nearest_distance, nearest_distance_brute, normalised_map,
                                  sample_surface, scene_cloud)
 from tohgs.grasps.expand import ExpansionSettings, expand_configurations
 from tohgs.hand import load_hand
@@ -57,6 +57,15 @@ def test_farthest_point_sampling_covers_better_than_random():
     assert cover_fps < 0.75 * cover_rand
     cloud = scene_cloud([trimesh.creation.box(extents=[1, 1, 0.05])], 256, np.random.default_rng(0))
     assert cloud.shape == (256, 3)
+
+
+def test_farthest_point_sampling_matches_the_numpy_reference():
+    pts = np.random.default_rng(2).normal(size=(2000, 3))
+    for start in (0, 17):
+        fast = farthest_point_sampling(pts, 300, start)
+        ref = farthest_point_sampling_reference(pts, 300, start)
+        assert len(np.unique(fast)) == 300 and start in fast
+        assert set(fast.tolist()) == set(ref.tolist())  # the same points (open3d returns them in index order)
 
 
 def test_shard_items_deal_configurations_round_robin():

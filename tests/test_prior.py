@@ -52,10 +52,14 @@ def test_filter_step_flags_what_the_thresholds_say(tmp_path):
     hand = load_hand("anny")
     g = _grasps(b=40, seed=1)
     g.pose[:, 6:] = hand.assets.presets["relaxed"][6:]  # within the joint limits
+    write_prior_grasps(g, tmp_path / "old.zarr")
+    with pytest.raises(ValueError, match="lacks the hand's 'joint_limits'"):  # the filter needs the hand's limits
+        filter_prior_grasps(tmp_path / "old.zarr", {}, tmp_path / "x.zarr")
+    g.attrs = {**g.attrs, "joint_limits": hand.assets.joint_limits.tolist()}  # as the synthesis writes them
     write_prior_grasps(g, tmp_path / "raw.zarr")
     thresholds = {"max_pv": 5e-6, "max_sd": 0.025, "max_contact_distance": 0.005, "max_fc": 0.5, "max_dis": 0.6,
                   "max_pen": 0.7}
-    f = filter_prior_grasps(tmp_path / "raw.zarr", hand.assets.joint_limits, thresholds, tmp_path / "f.zarr")
+    f = filter_prior_grasps(tmp_path / "raw.zarr", thresholds, tmp_path / "f.zarr")
     expect = ((g.pv < 5e-6) & (g.sd < 0.025) & (g.contact_distance <= 0.005) & (g.energies["fc"] < 0.5)
               & (g.energies["dis"] < 0.6) & (g.energies["pen"] < 0.7))
     assert 0 < expect.sum() < 40
@@ -66,7 +70,7 @@ def test_filter_step_flags_what_the_thresholds_say(tmp_path):
     df = summarize_prior_grasps([tmp_path / "f.zarr"], tmp_path / "summary.csv")
     assert df.accepted.tolist() == [expect.sum()] and df.fail_sd.tolist() == [int((g.sd >= 0.025).sum())]
     with pytest.raises(ValueError, match="unknown settings"):
-        filter_prior_grasps(tmp_path / "raw.zarr", hand.assets.joint_limits, {"max_sdd": 1}, tmp_path / "x.zarr")
+        filter_prior_grasps(tmp_path / "raw.zarr", {"max_sdd": 1}, tmp_path / "x.zarr")
 
 
 def test_synthesis_and_metrics_of_one_brick(tmp_path):

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-import trimesh
 
 from tohgs.assets.bricks import make_brick
 from tohgs.geometry.sdf import SDFGrid, exact_signed_distance
@@ -56,3 +55,31 @@ def test_save_and_load(arch, tmp_path):
     (tmp_path / "bad.npz").write_text("no")
     with pytest.raises(ValueError, match="bad.npz"):
         SDFGrid.load(tmp_path / "bad.npz")
+
+
+def test_lower_bound_bounds_the_interpolated_distance(arch):
+    mesh, grid = arch
+    pts = torch.as_tensor(np.random.default_rng(3).uniform(mesh.bounds[0] - 0.03, mesh.bounds[1] + 0.03, (4000, 3)),
+                          dtype=torch.float32)
+    exact = grid(pts)
+    bound = grid.lower_bound(pts)
+    assert (bound <= exact + 1e-6).all()
+    in_grid = ((pts >= grid.origin) & (pts <= grid.upper)).all(-1)
+    assert in_grid.sum() > 1000 and (~in_grid).sum() > 1000
+    assert (exact - bound)[in_grid].max() < 2 * 3**0.5 * grid.spacing  # a tight bound inside the grid
+
+
+def test_penetration_equals_the_dense_sum_and_its_gradient(arch):
+    mesh, grid = arch
+    rng = np.random.default_rng(4)
+    centre = mesh.bounds.mean(0)
+    pts = torch.as_tensor(centre + rng.normal(0, 0.03, (6, 500, 3)), dtype=torch.float32)
+    a = pts.clone().requires_grad_(True)
+    dense = torch.relu(-grid(a)).sum(-1)
+    (ga,) = torch.autograd.grad(dense.sum(), a)
+    b = pts.clone().requires_grad_(True)
+    sparse = grid.penetration(b)
+    (gb,) = torch.autograd.grad(sparse.sum(), b)
+    assert (dense > 0).all()  # the clouds do sink in
+    torch.testing.assert_close(sparse, dense)
+    torch.testing.assert_close(gb, ga)

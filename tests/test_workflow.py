@@ -124,6 +124,27 @@ def test_smoke_run_outputs(smoke_run):
         for method in cfg["prediction"]["methods"]:
             arrays, attrs = read_predictions(smoke_run / f"results/predictions/{task}/{method}.zarr")
             assert arrays["grasp_init"].shape[1] == cfg["prediction"]["samples"] and attrs["method"] == method
+    from tohgs.metrics.evaluate import COLUMNS
+
+    methods = cfg["evaluation"]["methods"]
+    for task in cfg["scenes"]["tasks"]:
+        for method in methods:
+            rows = pd.read_parquet(smoke_run / f"results/metrics/{task}/{method}.parquet")
+            assert list(rows.columns) == list(COLUMNS) and (rows.method == method).all()
+            assert ((rows.init_opp >= 0) & (rows.init_opp <= 1) & (rows.pv >= 0) & (rows.sd >= 0)).all()
+        assert (smoke_run / f"results/figures/predictions_{task}.png").stat().st_size > 20_000
+    table = pd.read_csv(smoke_run / "results/tables/table1.csv")
+    from tohgs.metrics.tables import METHOD_LABELS
+
+    assert len(table) == 3 * len(methods) and list(table.method[: len(methods)]) == [METHOD_LABELS[m] for m in methods]
+    assert table.grasps.sum() > 0
+    # The dataset row holds collision-free ground-truth grasps: OPP near zero by construction (the
+    # expansion lets vertices sink at most 2 mm into the scene).
+    ref = table[(table.method == "Dataset") & (table.grasps > 0)]
+    assert len(ref) and (ref.init_opp < 1.0).all() and (ref.goal_opp < 1.0).all()
+    assert len(pd.read_csv(smoke_run / "results/tables/qr_grid.csv")) == 3 * len(methods) * 12
+    assert "| Task |" in (smoke_run / "results/tables/table1.md").read_text()
+    assert (smoke_run / "results/figures/contact_maps.png").stat().st_size > 20_000
 
 
 def test_nothing_to_do_after_a_finished_run(smoke_run):
@@ -148,12 +169,20 @@ def _n_scenes(smoke_run) -> int:
 
 
 N_MAPS = 9  # 3 tasks x (1 train + 1 val + 1 test) shards in the smoke config
-MODELS = {"train": 6, "predict": 6}  # 3 tasks x 2 models; 3 tasks x 2 methods (ours, ours-gt-contact)
+MODELS = {"train": 6, "predict": 3}  # 3 tasks x 2 models; 3 tasks x the predicted method (ours)
+# The evaluation of every task's predictions: 3 tasks x 2 table methods (dataset, ours).
+EVALUATION = {"reference_grasps": 3, "evaluate": 6, "table1": 1, "predictions_figure": 3, "contact_maps_figure": 1}
+
+
+def _evaluated(methods_per_task: int, tasks: int = 3) -> dict[str, int]:
+    """The evaluation jobs after ``methods_per_task`` prediction stores of ``tasks`` tasks changed (the
+    figures read ``ours`` of every task)."""
+    return {"evaluate": methods_per_task * tasks, "table1": 1, "predictions_figure": tasks, "contact_maps_figure": 1}
 
 
 def _downstream(n_maps: int) -> dict[str, int]:
-    """``n_maps`` map shards and everything built from them."""
-    return {"maps": n_maps, "dataset_summary": 1, "maps_figure": 1, **MODELS}
+    """``n_maps`` map shards (every task's test shard among them) and everything built from them."""
+    return {"maps": n_maps, "dataset_summary": 1, "maps_figure": 1, **MODELS, **EVALUATION}
 
 
 DATASET = _downstream(N_MAPS)
@@ -202,7 +231,12 @@ def test_editing_code_makes_exactly_its_stage_stale(smoke_run):
                                           "supports": 1, "scenes_figure": 3, **AFTER_CATALOG}
     with _edited(smoke_run / "tohgs/viz/render.py"):
         assert _stale_jobs(smoke_run) == {"all": 1, "objects_figure": 1, "hand_figure": 1, "scenes_figure": 3,
-                                          "prior_figure": 1, "maps_figure": 1}
+                                          "prior_figure": 1, "maps_figure": 1, "predictions_figure": 3,
+                                          "contact_maps_figure": 1}
+    with _edited(smoke_run / "tohgs/metrics/tables.py"):
+        assert _stale_jobs(smoke_run) == {"all": 1, "table1": 1}
+    with _edited(smoke_run / "tohgs/metrics/evaluate.py"):
+        assert _stale_jobs(smoke_run) == {"all": 1, "evaluate": 6, "table1": 1}
     with _edited(smoke_run / "tohgs/sim/world.py"):
         assert _stale_jobs(smoke_run) == {"all": 1, "scenes": n_scenes, "scenes_figure": 3, "task_grasps": n_task,
                                           **_downstream(fed)}
@@ -250,7 +284,9 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
     stacking = dict(cfg["scenes"]["stacking"], max_offset=0.005)
     assert stale_with(("scenes.stacking", stacking)) == {"all": 1, "scenes": n_stacking, "scenes_figure": 1,
                                                          "task_grasps": n_stacking, "maps": _fed_shards(smoke_run, ("stacking",)),
-                                                         "dataset_summary": 1, "maps_figure": 1, "train": 2, "predict": 2}
+                                                         "dataset_summary": 1, "maps_figure": 1, "train": 2, "predict": 1,
+                                                         "reference_grasps": 1, **_evaluated(2, tasks=1),
+                                                         "contact_maps_figure": 1}
     # A hand setting concerns the hand only (a MANO file needs a path that exists).
     (smoke_run / "MANO_RIGHT.pkl").write_bytes(b"")
     changed = yaml.safe_load(yaml.safe_dump(cfg))
@@ -271,7 +307,13 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
     # A ContactDiffuser size: its three trainings and the predictions that sample from it (not ours-gt-contact);
     # a sampling setting: the predictions only.
     contact = dict(cfg["models"]["contact_diffuser"], d_model=24)
-    assert stale_with(("models.contact_diffuser", contact)) == {"all": 1, "train": 3, "predict": 3}
-    assert stale_with(("prediction", dict(cfg["prediction"], steps=4))) == {"all": 1, "predict": 6}
+    assert stale_with(("models.contact_diffuser", contact)) == {"all": 1, "train": 3, "predict": 3, **_evaluated(1)}
+    assert stale_with(("prediction", dict(cfg["prediction"], steps=4))) == {"all": 1, "predict": 3, **_evaluated(1)}
+    # A training setting: that model's trainings, their predictions, their evaluation and the tables.
+    grasp = dict(cfg["training"]["grasp_diffuser"], steps=cfg["training"]["grasp_diffuser"]["steps"] + 1)
+    assert stale_with(("training.grasp_diffuser", grasp)) == {"all": 1, "train": 3, "predict": 3, **_evaluated(1)}
+    # A QR threshold or the table's methods: the tables only; an SD setting: the prior grasps and the evaluation.
+    assert stale_with(("evaluation.qr", {"max_pv": 2.0e-06, "max_sd": 0.02})) == {"all": 1, "table1": 1}
+    assert stale_with(("evaluation.methods", ["ours"])) == {"all": 1, "table1": 1}
     # The dumps above sort the keys: the order of keys in a config file is not a change.
     assert stale_with(("seed", cfg["seed"])) == {}

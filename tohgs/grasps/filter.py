@@ -7,15 +7,22 @@ grasp passes if every check passes:
 - ``sd``: simulation displacement below ``max_sd`` (3 cm);
 - ``contact``: the hand within ``max_contact_distance`` (5 mm) of the object (GraspTTA's dataset filter);
 - ``joints``: every finger parameter within the hand's anatomical limits (plus ``joint_tolerance``);
-- ``energy``: DexGraspNet's success thresholds, E_fc < 0.3, E_dis < 0.005 m, E_pen < 0.001 m.
+- ``energy``: the optimiser's final energies below bounds (the dataclass defaults are DexGraspNet's success
+  thresholds, E_fc < 0.3, E_dis < 0.005 m, E_pen < 0.001 m; the default config loosens them, see
+  config/README.md).
 """
 
 from __future__ import annotations
 
+import logging
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
 
 import numpy as np
+
+log = logging.getLogger(__name__)
 
 CHECKS = ("pv", "sd", "contact", "joints", "energy")
 
@@ -68,3 +75,37 @@ def rejection_counts(flags: dict[str, np.ndarray]) -> dict[str, int]:
     out = Counter({c: int((~flags[c]).sum()) for c in CHECKS})
     out["passed"] = int(flags["passed"].sum())
     return dict(out)
+
+
+def filter_prior_grasps(raw: str | Path, thresholds: dict[str, Any], out: str | Path):
+    """Apply the filter to a raw store and write the filtered store (the same grasps plus pass flags).
+
+    Args:
+        raw: the raw store of :func:`tohgs.grasps.prior.make_prior_grasps`; its attribute ``joint_limits``
+            holds the (15, 3, 2) anatomical limits (radians) of the hand that made the grasps.
+        thresholds: a config mapping of :class:`FilterThresholds`.
+        out: the filtered store.
+
+    Returns:
+        the filtered :class:`~tohgs.data.grasps.PriorGrasps`.
+    """
+    from tohgs.config import settings_from
+    from tohgs.data.grasps import read_prior_grasps, write_prior_grasps
+
+    g = read_prior_grasps(raw, filtered=False)
+    if "joint_limits" not in g.attrs:
+        raise ValueError(f"{raw}: the raw store lacks the hand's 'joint_limits' attribute (written by an older "
+                         "tohgs): rerun the synthesis")
+    limits = np.asarray(g.attrs["joint_limits"], dtype=np.float64)
+    if limits.shape != (15, 3, 2):
+        raise ValueError(f"{raw}: attribute 'joint_limits' has shape {limits.shape}, expected (15, 3, 2)")
+    t = settings_from(FilterThresholds, thresholds)
+    flags = quality_flags(g.pv, g.sd, g.contact_distance, g.pose[:, 6:], limits, g.energies["fc"],
+                          g.energies["dis"], g.energies["pen"], t)
+    counts = rejection_counts(flags)
+    log.info("%s: %d of %d grasps pass; rejected by check: %s", g.object, counts["passed"], len(g),
+             {k: v for k, v in counts.items() if k != "passed"})
+    g.flags = flags
+    g.attrs = {**g.attrs, "thresholds": asdict(t), "rejections": counts}
+    write_prior_grasps(g, out)
+    return g

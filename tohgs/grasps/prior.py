@@ -5,7 +5,8 @@ Two steps, two workflow rules, so that a threshold change reruns only the cheap 
 1. :func:`make_prior_grasps`: the object's SDF grid (content-addressed cache), the annealing optimiser
    (:mod:`tohgs.grasps.synthesis`), then PV, SD and the contact distance of every grasp
    (:mod:`tohgs.metrics.quality`) -> the raw store.
-2. :func:`filter_prior_grasps`: the filter's flags (:mod:`tohgs.grasps.filter`) -> the filtered store.
+2. :func:`~tohgs.grasps.filter.filter_prior_grasps`: the filter's flags -> the filtered store (numpy only:
+   the joint limits travel in the raw store, so the filter job imports no torch).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ import trimesh
 from tohgs.config import settings_from
 from tohgs.data.grasps import ENERGY_TERMS, PriorGrasps, read_prior_grasps, write_prior_grasps
 from tohgs.geometry.sdf import SDFGrid
-from tohgs.grasps.filter import FilterThresholds, quality_flags, rejection_counts
+from tohgs.grasps.filter import filter_prior_grasps  # noqa: F401  (re-exported: the stage's second step)
 from tohgs.grasps.synthesis import SynthesisSettings, synthesize
 from tohgs.hand.model import HandModel
 from tohgs.metrics.quality import (DisplacementSimulator, SDSettings, contact_distance, palm_gravity,
@@ -145,33 +146,10 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
     grasps = PriorGrasps(
         object=name, pose=pose, contact_idx=result.contact_idx.cpu().numpy(), plane=result.planes.cpu().numpy(),
         energies={k: getattr(e, k).cpu().numpy() for k in ENERGY_TERMS}, **metrics,
-        attrs={"hand": hand_name, "seed": int(seed), "timing": timing, "history": result.history[:: max(1, len(result.history) // 100)],
+        attrs={"hand": hand_name, "joint_limits": hand.joint_limits.cpu().numpy().tolist(), "seed": int(seed), "timing": timing, "history": result.history[:: max(1, len(result.history) // 100)],
                "config": {"synthesis": asdict(s_syn), "sdf": asdict(s_sdf), "sd": asdict(s_sd), "voxel_pitch": voxel_pitch}})
     write_prior_grasps(grasps, out)
     return grasps
-
-
-def filter_prior_grasps(raw: str | Path, joint_limits: np.ndarray, thresholds: dict[str, Any], out: str | Path
-                        ) -> PriorGrasps:
-    """Apply the filter to a raw store and write the filtered store (the same grasps plus pass flags).
-
-    Args:
-        raw: the raw store of :func:`make_prior_grasps`.
-        joint_limits: (15, 3, 2) the hand's anatomical limits, radians.
-        thresholds: a config mapping of :class:`~tohgs.grasps.filter.FilterThresholds`.
-        out: the filtered store.
-    """
-    g = read_prior_grasps(raw, filtered=False)
-    t = settings_from(FilterThresholds, thresholds)
-    flags = quality_flags(g.pv, g.sd, g.contact_distance, g.pose[:, 6:], joint_limits, g.energies["fc"],
-                          g.energies["dis"], g.energies["pen"], t)
-    counts = rejection_counts(flags)
-    log.info("%s: %d of %d grasps pass; rejected by check: %s", g.object, counts["passed"], len(g),
-             {k: v for k, v in counts.items() if k != "passed"})
-    g.flags = flags
-    g.attrs = {**g.attrs, "thresholds": asdict(t), "rejections": counts}
-    write_prior_grasps(g, out)
-    return g
 
 
 def summarize_prior_grasps(store_paths: list[str | Path], out_csv: str | Path, min_accepted: int = 16):

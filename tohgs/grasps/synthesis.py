@@ -165,7 +165,7 @@ class GraspEnergy:
         normal = self.normals(x)
         e_fc = wrench_energy(x, normal)
         e_dis = self.sdf(x).abs().sum(-1)
-        e_pen = torch.relu(-self.sdf(verts)).sum(-1)
+        e_pen = self.sdf.penetration(verts)
         fingers = pose[:, 6:]
         e_prior = (((fingers - hand.prior_mean) / hand.prior_std) ** 2).mean(-1)
         kp = joints[:, self.kp_idx]

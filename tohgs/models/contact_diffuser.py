@@ -21,7 +21,9 @@ from tohgs.models.pointnet2 import PointNet2, PointNet2Config
 
 @dataclass(frozen=True)
 class ContactDiffuserConfig:
-    """Sizes (paper: d_model 256, 8 blocks, 4 heads, PointNet++ 512 + 512; about 16.9 M parameters)."""
+    """Sizes (paper: d_model 256, 8 blocks, 4 heads, PointNet++ 512 + 512). The official model has about
+    16.9 M parameters; this one at config/paper.yaml's sizes has 12.7 M (a GELU feed-forward instead of
+    GEGLU)."""
 
     d_model: int = 64
     n_blocks: int = 2

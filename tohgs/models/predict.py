@@ -59,6 +59,10 @@ def predict(task: str, method: str, test_shards: list[str | Path], grasp_ckpt: s
     """
     s = PredictSettings(**settings)
     torch.set_num_threads(max(1, s.threads))
+    # PyTorch's inference "fast path" for transformer layers materialises ContactDiffuser's 512 x 512
+    # attention; the regular path runs scaled_dot_product_attention and is 1.7x faster per layer on a CPU
+    # (same outputs to 1e-6). A process-wide switch: predict runs as its own job.
+    torch.backends.mha.set_fastpath_enabled(False)
     device = pick_device(s.device)
     data = MapDataset(test_shards, per="config")
     grasp_model, gck = load_model(grasp_ckpt, device)
@@ -78,7 +82,9 @@ def predict(task: str, method: str, test_shards: list[str | Path], grasp_ckpt: s
     vocab = data.shards[0].attrs["objects"] if data.shards else []
     t_contact = t_grasp = 0.0
     skipped = 0
-    for i in range(len(data)):
+    from tqdm import tqdm
+
+    for i in tqdm(range(len(data)), desc=f"predict {task}/{method}", mininterval=5.0):
         item = data[i]
         shard = data.shards[item["shard"]]
         c = item["row"]

@@ -2,6 +2,7 @@
 import os
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 REPO = Path(workflow.basedir).parent
 if str(REPO) not in sys.path:  # parse time only; jobs import the installed package (pip install -e .)
@@ -173,6 +174,22 @@ def prediction_outputs():
             for m in config["prediction"]["methods"]]
 
 
+def test_scene_stores(wildcards):
+    """Scene stores of the task's test objects (the configurations the predictions are of)."""
+    w = SimpleNamespace(task=wildcards.task, split="test")
+    return split_scene_stores(w)
+
+
+def all_test_shards(wildcards):
+    return [p for task in config["scenes"]["tasks"] for p in test_shards(SimpleNamespace(task=task))]
+
+
+def metric_outputs(wildcards):
+    """Every task's metric file of every method of the table."""
+    return [f"results/metrics/{task}/{m}.parquet" for task in config["scenes"]["tasks"]
+            for m in config["evaluation"]["methods"]]
+
+
 def final_outputs():
     """The default target's outputs known before the catalog exists (see catalog_outputs)."""
     return [
@@ -184,7 +201,10 @@ def final_outputs():
         "results/figures/prior_grasps.png",
         "results/maps/summary.csv",
         "results/figures/maps.png",
-    ] + prediction_outputs() + [f"results/figures/scenes_{task}.png" for task in config["scenes"]["tasks"]]
+        "results/tables/table1.csv",
+        "results/figures/contact_maps.png",
+    ] + prediction_outputs() + [f"results/figures/{kind}_{task}.png" for task in config["scenes"]["tasks"]
+                                for kind in ("scenes", "predictions")]
 
 
 def catalog_outputs(wildcards):

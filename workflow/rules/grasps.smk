@@ -32,8 +32,7 @@ rule prior_synthesis:
 rule prior_filter:
     input:
         raw="results/grasps/prior/raw/{object}.zarr",
-        hand="results/hand/hand.npz",
-        code=code("grasps/filter", "grasps/prior", "data/grasps", "config"),
+        code=code("grasps/filter", "data/grasps", "config"),
     output:
         directory("results/grasps/prior/{object}.zarr"),
     params:

@@ -5,7 +5,8 @@ rule train:
     input:
         shards=train_shards,
         hand="results/hand/hand.npz",
-        code=code("models", "data/maps", "data/store", "grasps/expand", "config"),
+        code=code("models/train", "models/diffusion", "models/pointnet2", "models/contact_diffuser",
+                  "models/grasp_diffuser", "data/maps", "data/store", "grasps/expand", "config"),
     output:
         model="results/models/{task}/{model}.pt",
         curve=report("results/models/{task}/{model}.png", caption="../report/training.rst", category="Training"),
@@ -26,6 +27,8 @@ rule train:
 
 
 rule predict:
+    wildcard_constraints:
+        method="ours|ours-gt-contact",
     input:
         shards=test_shards,
         grasp_model="results/models/{task}/grasp_diffuser.pt",

@@ -1,0 +1,139 @@
+"""Evaluation metrics (DS, OPP, per-configuration grasp metrics) and Table 1 on cases with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+import trimesh
+
+from tests.test_maps import built  # noqa: F401  (the module-scoped tiny dataset)
+from tohgs.grasps.expand import SceneCollider
+from tohgs.metrics.evaluate import COLUMNS, _ObjectAssets, diversity, grasp_metrics, occupied_fraction
+from tohgs.metrics.quality import DisplacementSimulator, SDSettings, surface_voxels
+from tohgs.metrics.tables import QualityThresholds, markdown, qr_grid, summarize, table1
+
+
+def test_diversity_is_zero_for_identical_hands_and_the_summed_shift_otherwise():
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(50, 3))
+    assert diversity(np.stack([v, v, v])) == 0.0
+    shifted = np.stack([v, v + [0.01, 0, 0], v + [0.03, 0, 0]])
+    # pairs: 0.01, 0.03, 0.02 per vertex, 50 vertices
+    assert diversity(shifted) == pytest.approx(50 * (0.01 + 0.03 + 0.02) / 3)
+    assert diversity(v[None]) == 0.0
+
+
+def test_occupied_fraction_counts_vertices_inside_the_scene():
+    table = trimesh.creation.box(extents=(1.0, 1.0, 0.1))  # top face at z = 0.05
+    collider = SceneCollider([table])
+    pts = np.zeros((2, 4, 3))
+    pts[0, :, 2] = [0.2, 0.2, 0.2, 0.2]  # all above the table
+    pts[1, :, 2] = [0.2, 0.0, -0.02, 0.3]  # two of four inside
+    np.testing.assert_allclose(occupied_fraction(pts, collider), [0.0, 0.5])
+
+
+@pytest.fixture(scope="module")
+def cube_assets(tmp_path_factory):
+    mesh = trimesh.creation.box(extents=(0.04, 0.04, 0.04))
+    path = tmp_path_factory.mktemp("cube") / "collision.obj"
+    mesh.export(path)
+    return _ObjectAssets(mesh, surface_voxels(mesh), path, np.asarray(mesh.vertices).mean(0))
+
+
+def test_grasp_metrics_of_a_clear_and_a_sunk_hand_at_a_moved_pose(cube_assets):
+    """A box 'hand' beside the cube at its world pose: no PV, a positive contact distance, the cube falls
+    (SD large); the same box sunk into the cube: PV > 0 and a negative distance; OPP against a table."""
+    pose = np.array([0.3, -0.2, 0.5, 0, 0, np.sin(0.3), np.cos(0.3)])  # moved and turned about z
+    slab = trimesh.creation.box(extents=(0.1, 0.1, 0.02)).subdivide_to_size(0.004)  # vertices on its faces
+    clear = slab.vertices + [0.3, -0.2, 0.5 - 0.06]  # 5 cm below the cube's centre, 3 cm under its bottom
+    sunk = slab.vertices + [0.3, -0.2, 0.5 - 0.02]  # half into the cube
+    verts = np.stack([clear, sunk])
+    table = trimesh.creation.box(extents=(1.0, 1.0, 0.1))
+    table.apply_translation((0.3, -0.2, 0.5 - 0.06 - 0.05))  # top face through the clear slab's centre
+    sd = SDSettings(gravity_direction="fixed")
+    with DisplacementSimulator(cube_assets.collision, cube_assets.vertex_mean, sd) as sim:
+        m = grasp_metrics(verts, verts, slab.faces, np.arange(4), cube_assets, pose, SceneCollider([table]), sd,
+                          0.001, sim)
+    assert m["pv"][0] == 0.0 and m["pv"][1] > 1e-6
+    assert m["contact_distance"][0] == pytest.approx(0.03, abs=1e-3) and m["contact_distance"][1] < 0
+    assert 0.02 < m["sd"][0] < 0.035  # nothing holds the cube: it falls onto the slab 3 cm below
+    np.testing.assert_allclose(m["init_opp"], m["goal_opp"])
+    assert 0.2 < m["init_opp"][0] < 0.8 and m["init_opp"][1] == 0.0
+
+
+def _rows(pv, sd, init_opp, goal_opp, method="ours", task="placing", config=None):
+    n = len(pv)
+    config = np.zeros(n, int) if config is None else np.asarray(config)
+    return pd.DataFrame({"task": task, "method": method, "object": "pb-x", "config_index": config,
+                         "sample": np.arange(n), "pv": pv, "sd": sd, "contact_distance": 0.0,
+                         "init_opp": init_opp, "goal_opp": goal_opp, "ds": config * 1.0 + 1.0,
+                         "hand_vertices": 778})[list(COLUMNS)]
+
+
+def test_summary_numbers_follow_their_definitions():
+    f = _rows(pv=[0.0, 1e-6, 5e-6, 2e-6], sd=[0.01, 0.03, 0.01, 0.015], init_opp=[0.0, 0.1, 0.0, 0.1],
+              goal_opp=[0.2, 0.0, 0.0, 0.0], config=[0, 0, 1, 1])
+    s = summarize(f, QualityThresholds())
+    assert s["cr"] == pytest.approx(75.0)
+    assert s["qr"] == pytest.approx(50.0)  # grasps 0 and 3
+    assert s["pv_avg"] == pytest.approx(2.0) and s["sd_avg"] == pytest.approx(1.625)
+    assert s["init_opp"] == pytest.approx(5.0) and s["goal_opp"] == pytest.approx(5.0)
+    assert s["ts"] == pytest.approx(0.5 * 0.95 * 0.95)
+    assert s["ds"] == pytest.approx(1.5)  # configurations' DS 1 and 2
+    assert s["grasps"] == 4 and s["configs"] == 2
+    # a looser SD threshold counts grasp 1 too
+    assert summarize(f, QualityThresholds(max_sd=0.04))["qr"] == pytest.approx(75.0)
+
+
+def test_table1_orders_rows_and_leaves_missing_methods_empty():
+    rows = pd.concat([_rows([0.0], [0.0], [0.0], [0.0], method="dataset"),
+                      _rows([1e-5], [0.05], [0.0], [0.0], method="ours", task="stacking")])
+    t = table1(rows, ["placing", "stacking"], ["dataset", "ours"], QualityThresholds())
+    assert list(zip(t.task, t.method)) == [("placing", "Dataset"), ("placing", "Ours"), ("stacking", "Dataset"),
+                                           ("stacking", "Ours")]
+    assert t.qr.iloc[0] == 100.0 and t.qr.iloc[3] == 0.0
+    assert np.isnan(t.qr.iloc[1]) and t.grasps.iloc[1] == 0
+    md = markdown(t)
+    assert md.count("\n") == 2 + 4 and "| placing | Dataset |" in md and "–" in md
+
+
+def test_qr_grid_is_monotone_in_both_thresholds():
+    rng = np.random.default_rng(1)
+    f = _rows(pv=rng.uniform(0, 5e-6, 200), sd=rng.uniform(0, 0.04, 200), init_opp=np.zeros(200),
+              goal_opp=np.zeros(200))
+    g = qr_grid(f, ["placing"], ["ours"], [1e-6, 2e-6, 3e-6, 4e-6], [0.01, 0.02, 0.03])
+    assert len(g) == 12
+    q = g.pivot(index="max_pv_cm3", columns="max_sd_cm", values="qr").to_numpy()
+    assert (np.diff(q, axis=0) >= 0).all() and (np.diff(q, axis=1) >= 0).all() and q[-1, -1] > q[0, 0]
+
+
+def test_reference_grasps_evaluate_collision_free_at_both_poses(built, tmp_path):  # noqa: F811
+    """The dataset row end to end on the tiny dataset: ground-truth grasps in the world frame, carried to
+    the goal, one metric row per grasp, no hand vertex inside the table at either pose."""
+    from tohgs.data.maps import read_map_shard
+    from tohgs.data.predictions import read_predictions, reference_predictions
+    from tohgs.grasps.expand import transform_grasp
+    from tohgs.metrics.evaluate import evaluate_predictions
+
+    tmp, hand, _, _, _ = built
+    shard = tmp / "shard-0.zarr"
+    arrays = reference_predictions([shard], "placing", 4, 0, tmp_path / "dataset.zarr")
+    sh = read_map_shard(shard)
+    stored, attrs = read_predictions(tmp_path / "dataset.zarr")
+    assert attrs["method"] == "dataset" and stored["grasp_init"].shape == (sh.n_configs, 4, 51)
+    wrist = np.asarray(sh.attrs["hand_wrist"])
+    for c in range(sh.n_configs):
+        truth = sh.grasp[sh.grasp_config == c].astype(np.float64) + np.r_[sh.centroid[c], np.zeros(48)]
+        # every drawn grasp is one of the configuration's own, in the world frame
+        assert all(np.abs(truth - g).max(1).min() < 1e-5 for g in arrays["grasp_init"][c])
+        np.testing.assert_allclose(arrays["grasp_goal"][c], transform_grasp(arrays["grasp_init"][c],
+                                                                           sh.goal_transform[c], wrist), atol=1e-6)
+    mesh = trimesh.load(tmp / "objects/brick-cube/mesh.obj", force="mesh")
+    mesh.export(tmp / "objects/brick-cube/collision.obj")  # the cube is convex: its own decomposition
+    rows = evaluate_predictions(tmp_path / "dataset.zarr", [tmp / "scenes/brick-cube.zarr"], tmp / "objects",
+                                tmp / "objects/supports/supports.json", hand, {"gravity_direction": "fixed"})
+    assert len(rows) == sh.n_configs * 4 and list(rows.columns) == list(COLUMNS)
+    assert (rows.init_opp == 0).all() and (rows.goal_opp == 0).all()
+    assert (rows.pv == 0).all() and (rows.contact_distance > 0).all()  # 5 mm above the top face
+    assert (rows.hand_vertices == hand.rest_vertices.shape[0]).all()

@@ -1,0 +1,184 @@
+"""Per-grasp evaluation of a method's test predictions (the paper's section 5.2), one row per grasp.
+
+For every predicted grasp of a test configuration (a prediction store, :mod:`tohgs.data.predictions`):
+
+- ``pv`` (m^3), ``sd`` (m), ``contact_distance`` (m): the quality metrics of :mod:`tohgs.metrics.quality`
+  (the same functions the prior-grasp filter uses), with the target at its *initial* pose in the world
+  frame; SD's gravity as ``metrics.sd.gravity_direction`` says (away from the palm by default; ``fixed``
+  takes the world-frame vector, -z);
+- ``init_opp`` / ``goal_opp``: the fraction of hand vertices inside the scene meshes (support, shelf,
+  obstacles, base brick; never the target) for the hand at the initial pose and for the same hand carried
+  to the goal pose;
+- ``ds``: the configuration's diversity, repeated on each of its rows: the mean over all pairs of its
+  grasps of the summed per-vertex L2 distance between the two hands (at the initial pose), m. It scales
+  with the hand's vertex count, which each row records (``hand_vertices``; MANO has 778).
+
+The table-level numbers (CR, QR, TS and the QR grid) are computed from these rows by
+:mod:`tohgs.metrics.tables`, so a QR threshold change re-reads the rows and reruns nothing else.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch
+import trimesh
+
+from tohgs.config import settings_from
+from tohgs.data.predictions import read_predictions
+from tohgs.data.scenes import read_scenes
+from tohgs.grasps.expand import SceneCollider, pose_matrix, scene_meshes
+from tohgs.hand.model import HandModel
+from tohgs.metrics.quality import (DisplacementSimulator, SDSettings, contact_distance, palm_gravity,
+                                   penetration_volume, surface_voxels)
+
+log = logging.getLogger(__name__)
+
+COLUMNS = ("task", "method", "object", "config_index", "sample", "pv", "sd", "contact_distance", "init_opp",
+           "goal_opp", "ds", "hand_vertices")
+
+
+def hand_vertices(hand: HandModel, grasps: np.ndarray) -> np.ndarray:
+    """(B, V, 3) float64 vertices of (B, 51) grasp vectors, metres."""
+    with torch.no_grad():
+        v = hand(torch.as_tensor(np.asarray(grasps).reshape(-1, 51), dtype=hand.rest_vertices.dtype)).vertices
+    return v.cpu().numpy().astype(np.float64)
+
+
+def diversity(vertices: np.ndarray) -> float:
+    """DS of one configuration: the mean over pairs ``i < j`` of ``sum_v |x_i,v - x_j,v|`` for (S, V, 3)
+    hand vertices, m (0 for fewer than two hands)."""
+    s = len(vertices)
+    if s < 2:
+        return 0.0
+    i, j = np.triu_indices(s, 1)
+    return float(np.linalg.norm(vertices[i] - vertices[j], axis=-1).sum(-1).mean())
+
+
+def occupied_fraction(vertices: np.ndarray, collider: SceneCollider) -> np.ndarray:
+    """(B,) the fraction of each hand's (B, V, 3) vertices inside the collider's meshes (OPP)."""
+    b, v, _ = vertices.shape
+    return (collider.depth_inside(vertices.reshape(-1, 3)).reshape(b, v) > 0).mean(1)
+
+
+@dataclass
+class _ObjectAssets:
+    mesh: trimesh.Trimesh
+    voxels: np.ndarray  # surface voxels in the mesh frame
+    collision: Path
+    vertex_mean: np.ndarray
+
+
+def _object_assets(objects_dir: Path, name: str, pitch: float, cache: dict) -> _ObjectAssets:
+    if name not in cache:
+        path = objects_dir / name / "mesh.obj"
+        try:
+            mesh = trimesh.load(path, force="mesh", process=False)
+        except Exception as exc:
+            raise ValueError(f"{path}: unreadable object mesh ({exc})") from exc
+        cache[name] = _ObjectAssets(mesh, surface_voxels(mesh, pitch), objects_dir / name / "collision.obj",
+                                    np.asarray(mesh.vertices).mean(0))
+    return cache[name]
+
+
+def grasp_metrics(verts_init: np.ndarray, verts_goal: np.ndarray, faces: np.ndarray, palm_ids: np.ndarray,
+                  obj: _ObjectAssets, target_pose: np.ndarray, collider: SceneCollider, sd: SDSettings,
+                  pitch: float, sim: DisplacementSimulator) -> dict[str, np.ndarray]:
+    """PV, SD, contact distance and both OPPs of S hands of one configuration.
+
+    Args:
+        verts_init, verts_goal: (S, V, 3) world-frame hand vertices at the initial / goal pose, m.
+        faces: (F, 3) the hand's closed faces.
+        palm_ids: vertex ids of the palm's contact candidates (SD's ``away_from_palm`` gravity).
+        obj: the target's mesh, surface voxels, collision file and vertex mean (mesh frame).
+        target_pose: the target's initial ``[x, y, z, qx, qy, qz, qw]`` pose.
+        collider: the scene without the target.
+        sd, pitch: the SD protocol and the PV voxel size.
+        sim: a simulator loaded with the target's collision shape.
+    """
+    T = pose_matrix(target_pose)
+    # PV and the contact distance in the object's mesh frame (the voxels are cached there)
+    local = (verts_init - T[:3, 3]) @ T[:3, :3]
+    pv = np.atleast_1d(penetration_volume(local, faces, obj.voxels, pitch))
+    cd = np.atleast_1d(contact_distance(local, obj.mesh))
+    centre = T[:3, :3] @ obj.vertex_mean + T[:3, 3]
+    if sd.gravity_direction == "away_from_palm":
+        gravity = palm_gravity(verts_init[:, palm_ids].mean(1), centre, float(np.linalg.norm(sd.gravity)))
+    elif sd.gravity_direction == "fixed":
+        gravity = np.broadcast_to(np.asarray(sd.gravity, dtype=np.float64), (len(verts_init), 3))
+    else:
+        raise ValueError(f"metrics.sd.gravity_direction must be 'away_from_palm' or 'fixed', not {sd.gravity_direction!r}")
+    sds = np.array([sim.displacement(v, faces, object_pose=np.asarray(target_pose, dtype=np.float64), gravity=g)
+                    for v, g in zip(verts_init, gravity)])
+    return {"pv": pv, "sd": sds, "contact_distance": cd, "init_opp": occupied_fraction(verts_init, collider),
+            "goal_opp": occupied_fraction(verts_goal, collider)}
+
+
+def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | Path], objects_dir: str | Path,
+                         supports_json: str | Path, hand: HandModel, sd: dict, voxel_pitch: float = 0.001,
+                         progress: bool = False) -> pd.DataFrame:
+    """One row per predicted grasp (columns :data:`COLUMNS`) of one task and method.
+
+    Args:
+        prediction_store: the method's predictions (``results/predictions/<task>/<method>.zarr``).
+        scene_stores: the scene stores of the task's test objects (``results/scenes/<task>/<object>.zarr``).
+        objects_dir: the objects stage's folder (``<name>/mesh.obj``, ``<name>/collision.obj``).
+        supports_json: the supports file of the objects stage.
+        hand: the hand model the predictions are vectors of.
+        sd: a config mapping of :class:`~tohgs.metrics.quality.SDSettings`.
+        voxel_pitch: PV's voxel size, m.
+        progress: show a progress bar over configurations.
+    """
+    from tohgs.assets.supports import read_supports
+
+    arrays, attrs = read_predictions(prediction_store)
+    s_sd = settings_from(SDSettings, sd)
+    scenes = {}
+    for p in scene_stores:
+        sc = read_scenes(p)
+        scenes[sc.object] = sc
+    vocab = list(attrs["objects"])
+    supports = read_supports(supports_json)
+    objects_dir = Path(objects_dir)
+    faces = hand.closed_faces.cpu().numpy()
+    palm_ids = hand.contact_ids[-8:].cpu().numpy()  # the palm's contact candidates
+    assets: dict = {}
+    meshes: dict = {}
+    rows = []
+    it = range(len(arrays["object_id"]))
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(it, desc=f"evaluate {attrs['task']}/{attrs['method']}", mininterval=5.0)
+    sims: dict[str, DisplacementSimulator] = {}
+    try:
+        for i in it:
+            name = vocab[int(arrays["object_id"][i])]
+            if name not in scenes:
+                raise ValueError(f"{prediction_store}: configuration {i} is of {name!r}, which has no scene store among "
+                                 f"the inputs ({sorted(scenes)})")
+            sc, c = scenes[name], int(arrays["config_index"][i])
+            if not 0 <= c < len(sc):
+                raise ValueError(f"{prediction_store}: configuration index {c} of {name!r} is out of range ({len(sc)})")
+            obj = _object_assets(objects_dir, name, voxel_pitch, assets)
+            if name not in sims:
+                sims[name] = DisplacementSimulator(obj.collision, obj.vertex_mean, s_sd)
+            collider = SceneCollider(scene_meshes(sc, c, objects_dir, supports, meshes))
+            v_init = hand_vertices(hand, arrays["grasp_init"][i])
+            v_goal = hand_vertices(hand, arrays["grasp_goal"][i])
+            m = grasp_metrics(v_init, v_goal, faces, palm_ids, obj, sc.target_init_pose[c], collider, s_sd,
+                              voxel_pitch, sims[name])
+            ds = diversity(v_init)
+            for k in range(len(v_init)):
+                rows.append({"task": attrs["task"], "method": attrs["method"], "object": name, "config_index": c,
+                             "sample": k, **{key: float(val[k]) for key, val in m.items()}, "ds": ds,
+                             "hand_vertices": v_init.shape[1]})
+    finally:
+        for sim in sims.values():
+            sim.close()
+    frame = pd.DataFrame(rows, columns=list(COLUMNS))
+    return frame.astype({"config_index": np.int32, "sample": np.int32, "hand_vertices": np.int32})

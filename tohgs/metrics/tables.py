@@ -1,0 +1,120 @@
+"""The paper's Table 1 from per-grasp metric rows (:mod:`tohgs.metrics.evaluate`), and the QR grid.
+
+Columns of ``table1.csv`` (one row per task and method, the methods in the config's order):
+
+=============  =================================================================================
+column         meaning
+=============  =================================================================================
+task, method   the task and the method's display name (``dataset`` -> "Dataset", ...)
+pv_avg/std     penetration volume, cm^3
+sd_avg/std     simulation displacement, cm
+cr             contact ratio, %: grasps with PV > 0
+qr             quality ratio, %: grasps with PV < ``max_pv`` and SD < ``max_sd`` (3 cm^3, 2 cm)
+ds             diversity: the mean over configurations of their DS, m (summed over hand vertices)
+init_opp       hand vertices inside the initial scene, %
+goal_opp       hand vertices inside the goal scene, %
+ts             task success ``QR x (1 - InitOPP) x (1 - GoalOPP)`` from the averages
+grasps         grasps evaluated; ``configs``: configurations they came from
+=============  =================================================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+METHOD_LABELS = {"dataset": "Dataset", "ours": "Ours", "ours-gt-contact": "Ours (GT contact)"}
+TABLE1_COLUMNS = ("task", "method", "pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "init_opp",
+                  "goal_opp", "ts", "grasps", "configs")
+_HEADERS = {"task": "Task", "method": "Method", "pv_avg": "PV avg (cm³)", "pv_std": "PV std", "sd_avg": "SD avg (cm)",
+            "sd_std": "SD std", "cr": "CR %", "qr": "QR %", "ds": "DS", "init_opp": "Init OPP %",
+            "goal_opp": "Goal OPP %", "ts": "TS", "grasps": "grasps", "configs": "configs"}
+
+
+@dataclass(frozen=True)
+class QualityThresholds:
+    """A grasp is of quality if PV < ``max_pv`` (m^3) and SD < ``max_sd`` (m); the paper's 3 cm^3, 2 cm."""
+
+    max_pv: float = 3e-6
+    max_sd: float = 0.02
+
+
+def quality_ratio(frame: pd.DataFrame, t: QualityThresholds) -> float:
+    """QR in % (NaN without rows)."""
+    if len(frame) == 0:
+        return float("nan")
+    return float(((frame.pv < t.max_pv) & (frame.sd < t.max_sd)).mean() * 100)
+
+
+def summarize(frame: pd.DataFrame, t: QualityThresholds) -> dict[str, float]:
+    """The Table 1 numbers of one task and method's rows (NaN where there are none)."""
+    n = len(frame)
+    if n == 0:
+        out = {k: float("nan") for k in TABLE1_COLUMNS[2:]}
+        out.update(grasps=0, configs=0)
+        return out
+    qr = quality_ratio(frame, t)
+    init_opp, goal_opp = float(frame.init_opp.mean()), float(frame.goal_opp.mean())
+    ds = frame.groupby(["object", "config_index"]).ds.first()
+    return {"pv_avg": float(frame.pv.mean() * 1e6), "pv_std": float(frame.pv.std(ddof=0) * 1e6),
+            "sd_avg": float(frame.sd.mean() * 100), "sd_std": float(frame.sd.std(ddof=0) * 100),
+            "cr": float((frame.pv > 0).mean() * 100), "qr": qr, "ds": float(ds.mean()),
+            "init_opp": init_opp * 100, "goal_opp": goal_opp * 100,
+            "ts": qr / 100 * (1 - init_opp) * (1 - goal_opp), "grasps": n, "configs": len(ds)}
+
+
+def read_metrics(paths: list[str | Path]) -> pd.DataFrame:
+    """The rows of several metric files, concatenated (a missing column names the file)."""
+    from tohgs.metrics.evaluate import COLUMNS
+
+    frames = []
+    for p in paths:
+        f = pd.read_parquet(p)
+        missing = set(COLUMNS) - set(f.columns)
+        if missing:
+            raise ValueError(f"{p}: metric file lacks columns {sorted(missing)}")
+        frames.append(f)
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=list(COLUMNS))
+
+
+def table1(rows: pd.DataFrame, tasks: list[str], methods: list[str], t: QualityThresholds) -> pd.DataFrame:
+    """One row per task and method, in the given orders."""
+    out = []
+    for task in tasks:
+        for m in methods:
+            sel = rows[(rows.task == task) & (rows.method == m)]
+            out.append({"task": task, "method": METHOD_LABELS.get(m, m), **summarize(sel, t)})
+    return pd.DataFrame(out, columns=list(TABLE1_COLUMNS))
+
+
+def qr_grid(rows: pd.DataFrame, tasks: list[str], methods: list[str], max_pv: list[float], max_sd: list[float]
+            ) -> pd.DataFrame:
+    """QR (%) for every PV x SD threshold pair (m^3, m; listed in cm^3 and cm), per task and method."""
+    out = []
+    for task in tasks:
+        for m in methods:
+            sel = rows[(rows.task == task) & (rows.method == m)]
+            for pv in max_pv:
+                for sd in max_sd:
+                    out.append({"task": task, "method": METHOD_LABELS.get(m, m), "max_pv_cm3": round(pv * 1e6, 6),
+                                "max_sd_cm": round(sd * 100, 6), "qr": quality_ratio(sel, QualityThresholds(pv, sd))})
+    return pd.DataFrame(out, columns=["task", "method", "max_pv_cm3", "max_sd_cm", "qr"])
+
+
+def markdown(table: pd.DataFrame, digits: int = 3) -> str:
+    """A GitHub markdown table of :func:`table1`'s frame (NaN as an en dash)."""
+    cols = list(table.columns)
+    lines = ["| " + " | ".join(_HEADERS.get(c, c) for c in cols) + " |", "|" + "---|" * len(cols)]
+    for _, r in table.iterrows():
+        cells = []
+        for c in cols:
+            v = r[c]
+            if isinstance(v, (float, np.floating)):
+                cells.append("–" if not np.isfinite(v) else f"{v:.{digits}f}" if c in ("ts", "ds") else f"{v:.2f}")
+            else:
+                cells.append(str(v))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,136 @@
+"""Evaluation figures: predicted hands in their initial and goal scenes (the paper's Figure 6) and predicted
+contact maps next to the ground truth (its Figure 5)."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from tohgs.assets.supports import read_supports  # noqa: E402
+from tohgs.data.maps import read_map_shard  # noqa: E402
+from tohgs.data.predictions import read_predictions  # noqa: E402
+from tohgs.data.scenes import read_scenes  # noqa: E402
+from tohgs.hand.model import HandModel  # noqa: E402
+from tohgs.sim.scenes import load_configuration  # noqa: E402
+from tohgs.sim.world import World  # noqa: E402
+from tohgs.viz.render import save_figure, set_equal  # noqa: E402
+from tohgs.viz.scenes import COLORS  # noqa: E402
+
+log = logging.getLogger(__name__)
+
+HAND_RGBA = (0.96, 0.78, 0.62, 1.0)
+
+
+def pick_configs(object_ids: np.ndarray, n: int) -> list[int]:
+    """Up to ``n`` row indices of a prediction store, one per object first, then round-robin."""
+    by_obj: dict[int, list[int]] = {}
+    for i, o in enumerate(np.asarray(object_ids).tolist()):
+        by_obj.setdefault(o, []).append(i)
+    out: list[int] = []
+    k = 0
+    while len(out) < n and any(k < len(v) for v in by_obj.values()):
+        out += [v[k] for v in by_obj.values() if k < len(v)][: n - len(out)]
+        k += 1
+    return out
+
+
+def close_camera(target: np.ndarray, task: str, distance: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """Eye and look-at points ``distance`` (m) from a target position: from the open front of a shelf
+    (-y, slightly above) for Shelving, from the front-right and above otherwise."""
+    look = np.asarray(target, dtype=np.float64)
+    if task == "shelving":
+        d = np.array([0.0, -1.0, 0.25])
+    else:
+        d = np.array([0.45, -0.75, 0.75])
+    return look + distance * d / np.linalg.norm(d), look
+
+
+def _add_hand(world: World, vertices: np.ndarray, faces: np.ndarray) -> int:
+    """A static, visual-only hand mesh in ``world`` (world-frame (V, 3) vertices)."""
+    import pybullet as pb
+
+    vis = pb.createVisualShape(pb.GEOM_MESH, vertices=np.asarray(vertices, dtype=np.float64).tolist(),
+                               indices=np.asarray(faces, dtype=np.int64).ravel().tolist(), rgbaColor=HAND_RGBA,
+                               physicsClientId=world.cid)
+    return pb.createMultiBody(0, -1, vis, physicsClientId=world.cid)
+
+
+def plot_predictions(prediction_store: str | Path, scene_stores: list[str | Path], objects_dir: str | Path,
+                     supports_json: str | Path, hand: HandModel, out_png: str | Path, max_configs: int = 4,
+                     size: tuple[int, int] = (360, 270)) -> None:
+    """Test configurations (rows) with the method's first predicted hand at the initial pose (left) and
+    carried to the goal pose (right); target red, obstacles blue, base green, hand skin-coloured."""
+    arrays, attrs = read_predictions(prediction_store)
+    scenes = {s.object: s for s in (read_scenes(p) for p in scene_stores)}
+    supports = read_supports(supports_json)
+    rows = pick_configs(arrays["object_id"], max_configs)
+    if not rows:
+        raise ValueError(f"{prediction_store}: no predicted configuration to draw")
+    faces = hand.closed_faces.cpu().numpy()
+    fig, axes = plt.subplots(len(rows), 2, figsize=(7.2, 2.75 * len(rows)), squeeze=False)
+    with World() as world:
+        for r, i in enumerate(rows):
+            name = attrs["objects"][int(arrays["object_id"][i])]
+            sc, c = scenes[name], int(arrays["config_index"][i])
+            for col, which in enumerate(("init", "goal")):
+                target = sc.target_init_pose[c, :3] if which == "init" else sc.target_goal_pose[c, :3]
+                eye, look = close_camera(target, attrs["task"])
+                load_configuration(world, sc, c, objects_dir, supports, which=which, static=True, colors=COLORS)
+                with torch.no_grad():
+                    g = torch.as_tensor(arrays[f"grasp_{which}"][i, :1], dtype=hand.rest_vertices.dtype)
+                    verts = hand(g).vertices[0].cpu().numpy()
+                _add_hand(world, verts, faces)
+                axes[r, col].imshow(world.render(eye, look, *size))
+                axes[r, col].set_axis_off()
+                axes[r, col].set_title(f"{name} #{c} {which}", fontsize=8)
+    fig.suptitle(f"{attrs['task']} / {attrs['method']}: a predicted hand (initial | goal)", fontsize=9)
+    fig.tight_layout()
+    save_figure(fig, out_png)
+    log.info("wrote %s (%d configurations)", out_png, len(rows))
+
+
+def plot_contact_maps(prediction_stores: list[str | Path], test_shards: list[str | Path], out_png: str | Path,
+                      per_task: int = 2, samples: int = 3) -> None:
+    """Per task, test configurations with ground-truth grasps (rows): a ground-truth contact map, then
+    ``samples`` predicted maps of the same configuration, on the object cloud (1 = touching)."""
+    shards: dict[str, list] = {}
+    for p in test_shards:
+        sh = read_map_shard(p)
+        shards.setdefault(sh.attrs["task"], []).append(sh)
+    picks = []
+    for store in prediction_stores:
+        arrays, attrs = read_predictions(store)
+        key = {(int(o), int(c)): i for i, (o, c) in enumerate(zip(arrays["object_id"], arrays["config_index"]))}
+        found = []
+        for sh in shards.get(attrs["task"], []):
+            for c in np.unique(sh.grasp_config):
+                k = (int(sh.object_id[c]), int(sh.config_index[c]))
+                if k in key:
+                    found.append((sh, int(c), int(np.flatnonzero(sh.grasp_config == c)[0]), arrays["contact"][key[k]]))
+        order = pick_configs(np.array([int(f[0].object_id[f[1]]) for f in found]), per_task)
+        picks += [(attrs["task"], *found[k]) for k in order]
+    if not picks:
+        raise ValueError("no test configuration has both ground-truth grasps and predictions")
+    cols = 1 + samples
+    fig = plt.figure(figsize=(2.6 * cols, 2.6 * len(picks)))
+    for r, (task, sh, c, g, pred) in enumerate(picks):
+        pts = sh.points[c]
+        name = sh.attrs["objects"][int(sh.object_id[c])]
+        maps = [("ground truth", sh.contact[g])] + [(f"predicted {k + 1}", pred[k]) for k in range(min(samples, len(pred)))]
+        for j, (label, values) in enumerate(maps):
+            ax = fig.add_subplot(len(picks), cols, r * cols + j + 1, projection="3d")
+            ax.view_init(25, -60)
+            ax.scatter(*pts.T, s=4, c=values, cmap="inferno", vmin=0, vmax=1)
+            set_equal(ax, pts, pad=0.1)
+            ax.set_title(f"{task}: {name} #{int(sh.config_index[c])}\n{label}" if j == 0 else label, fontsize=8)
+    fig.suptitle("Contact maps of test configurations: ground truth | ContactDiffuser samples (1 = touching)", fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    save_figure(fig, out_png)
+    log.info("wrote %s (%d configurations)", out_png, len(picks))

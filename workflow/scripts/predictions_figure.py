@@ -1,0 +1,13 @@
+"""Snakemake script of rule predictions_figure: predicted hands in their initial and goal scenes."""
+from pathlib import Path
+
+from tohgs.io import setup_logging
+
+setup_logging(snakemake.log[0])
+
+from tohgs.hand import HandAssets, HandModel  # noqa: E402
+from tohgs.viz.predictions import plot_predictions  # noqa: E402
+
+inp = snakemake.input
+plot_predictions(inp.predictions, inp.scenes, Path(inp.supports).parent, f"{inp.supports}/supports.json",
+                 HandModel(HandAssets.load(inp.hand)), snakemake.output[0], snakemake.params.configs)
