@@ -30,7 +30,7 @@ from tohgs.geometry.sdf import SDFGrid
 from tohgs.grasps.filter import filter_prior_grasps  # noqa: F401  (re-exported: the stage's second step)
 from tohgs.grasps.synthesis import SynthesisSettings, synthesize
 from tohgs.hand.model import HandModel
-from tohgs.metrics.quality import (DisplacementSimulator, SDSettings, contact_distance, palm_gravity,
+from tohgs.metrics.quality import (DisplacementSimulator, SDSettings, contact_distance, sd_gravity,
                                    penetration_volume, surface_voxels)
 
 log = logging.getLogger(__name__)
@@ -85,13 +85,8 @@ def evaluate_grasps(hand: HandModel, pose: np.ndarray, mesh: trimesh.Trimesh, co
 
         it = tqdm(it, desc="SD", mininterval=5.0)
     centre = np.asarray(mesh.vertices).mean(0)
-    if sd_settings.gravity_direction == "away_from_palm":
-        palm = verts[:, hand.contact_ids[-8:].cpu().numpy()].mean(1)  # the 8 palm candidates
-        gravity = palm_gravity(palm, centre, float(np.linalg.norm(sd_settings.gravity)))
-    elif sd_settings.gravity_direction == "fixed":
-        gravity = np.broadcast_to(np.asarray(sd_settings.gravity, dtype=np.float64), (len(verts), 3))
-    else:
-        raise ValueError(f"metrics.sd.gravity_direction must be 'away_from_palm' or 'fixed', not {sd_settings.gravity_direction!r}")
+    palm = verts[:, hand.contact_ids[-8:].cpu().numpy()].mean(1)  # the 8 palm candidates
+    gravity = sd_gravity(sd_settings, palm, centre)
     with DisplacementSimulator(collision_obj, centre, sd_settings) as sim:
         sd = np.array([sim.displacement(verts[i], faces, gravity=gravity[i]) for i in it])
     return {"pv": np.atleast_1d(pv), "sd": sd, "contact_distance": np.atleast_1d(cd)}

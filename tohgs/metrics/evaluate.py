@@ -33,8 +33,8 @@ from tohgs.data.predictions import read_predictions
 from tohgs.data.scenes import read_scenes
 from tohgs.grasps.expand import SceneCollider, pose_matrix, scene_meshes
 from tohgs.hand.model import HandModel
-from tohgs.metrics.quality import (DisplacementSimulator, SDSettings, contact_distance, palm_gravity,
-                                   penetration_volume, surface_voxels)
+from tohgs.metrics.quality import (DisplacementSimulator, SDSettings, contact_distance, penetration_volume,
+                                   sd_gravity, surface_voxels)
 
 log = logging.getLogger(__name__)
 
@@ -106,12 +106,7 @@ def grasp_metrics(verts_init: np.ndarray, verts_goal: np.ndarray, faces: np.ndar
     pv = np.atleast_1d(penetration_volume(local, faces, obj.voxels, pitch))
     cd = np.atleast_1d(contact_distance(local, obj.mesh))
     centre = T[:3, :3] @ obj.vertex_mean + T[:3, 3]
-    if sd.gravity_direction == "away_from_palm":
-        gravity = palm_gravity(verts_init[:, palm_ids].mean(1), centre, float(np.linalg.norm(sd.gravity)))
-    elif sd.gravity_direction == "fixed":
-        gravity = np.broadcast_to(np.asarray(sd.gravity, dtype=np.float64), (len(verts_init), 3))
-    else:
-        raise ValueError(f"metrics.sd.gravity_direction must be 'away_from_palm' or 'fixed', not {sd.gravity_direction!r}")
+    gravity = sd_gravity(sd, verts_init[:, palm_ids].mean(1), centre)
     sds = np.array([sim.displacement(v, faces, object_pose=np.asarray(target_pose, dtype=np.float64), gravity=g)
                     for v, g in zip(verts_init, gravity)])
     return {"pv": pv, "sd": sds, "contact_distance": cd, "init_opp": occupied_fraction(verts_init, collider),

@@ -74,6 +74,17 @@ def palm_gravity(palm_centres: np.ndarray, object_centre: np.ndarray, magnitude:
     return magnitude * d / np.linalg.norm(d, axis=-1, keepdims=True).clip(1e-9)
 
 
+def sd_gravity(settings: "SDSettings", palm_centres: np.ndarray, object_centre: np.ndarray) -> np.ndarray:
+    """(B, 3) SD gravity per hand as ``settings.gravity_direction`` says: :func:`palm_gravity` from the
+    (B, 3) palm centres through the object's centre (same frame), or the fixed ``settings.gravity``."""
+    palm_centres = np.atleast_2d(palm_centres)
+    if settings.gravity_direction == "away_from_palm":
+        return palm_gravity(palm_centres, object_centre, float(np.linalg.norm(settings.gravity)))
+    if settings.gravity_direction == "fixed":
+        return np.broadcast_to(np.asarray(settings.gravity, dtype=np.float64), (len(palm_centres), 3))
+    raise ValueError(f"metrics.sd.gravity_direction must be 'away_from_palm' or 'fixed', not {settings.gravity_direction!r}")
+
+
 def contact_distance(hand_vertices: np.ndarray, object_mesh: trimesh.Trimesh) -> np.ndarray:
     """Smallest signed distance from the hand's vertices to the object's surface (negative inside), m.
 
