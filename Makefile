@@ -35,7 +35,7 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q torch==2.13.0
 	$(PY) -m pip install -q -e ".[test]"
-	@$(PY) -c "import tohgs, torch, open3d, pybullet, coacd, snakemake, diffusers; print('tohgs environment ready: torch', torch.__version__)"
+	@$(PY) -c "import tohgs, torch, open3d, pybullet, coacd, snakemake; print('tohgs environment ready: torch', torch.__version__)"
 	@touch $@
 
 # the HTML report of a finished run: tables and figures with their captions (workflow/report/)

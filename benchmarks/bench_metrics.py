@@ -37,7 +37,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     with torch.no_grad():
         rest = hand(pose).vertices.numpy()
-    palm = rest[:, hand.assets.contact_ids[-8:]].mean(1)  # the 8 palm candidates
+    palm = rest[:, hand.assets.palm_ids].mean(1)  # the palm centre
     offsets = np.stack([np.zeros(args.n), obj.extents[1] / 2 + rng.uniform(-0.005, 0.015, args.n), np.zeros(args.n)], 1)
     verts = rest - palm[:, None] + offsets[:, None]
     faces = hand.assets.closed_faces

@@ -15,7 +15,8 @@ import numpy as np
 import torch
 
 from tohgs.assets.bricks import make_brick
-from tohgs.geometry.sdf import SDFGrid, exact_signed_distance
+from tohgs.geometry.raycast import exact_signed_distance
+from tohgs.geometry.sdf import SDFGrid
 
 REPO = Path(__file__).resolve().parent.parent
 

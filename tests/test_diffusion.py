@@ -9,23 +9,81 @@ import torch
 from torch import nn
 
 from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
-from tohgs.models.diffusion import DiffusionConfig, _ddpm_with_noise, make_scheduler, sample, timestep_embedding
+from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, sample, timestep_embedding
 from tohgs.models.grasp_diffuser import GraspDiffuser, GraspDiffuserConfig, grasp_losses, vertex_normals
+from tohgs.models.train import EMA, cosine_with_warmup
 
 SMALL_PN = {"sa": [[32, 0.05, 8, [16, 32]], [8, 0.1, 8, [32, 32]], [0, 0.0, 0, [32, 48]]], "fp": [[32], [32], [32]]}
 
 
-def test_our_ddpm_step_equals_diffusers_given_the_same_noise():
-    for prediction in ("epsilon", "sample"):
-        cfg = DiffusionConfig(prediction=prediction)
-        sched = make_scheduler(cfg, "ddpm")
-        sched.set_timesteps(50)
+def _diffusers_scheduler(cfg: DiffusionConfig, sampler: str):
+    """diffusers' scheduler for ``cfg``: the reference our schedule is checked against (a test dependency)."""
+    diffusers = pytest.importorskip("diffusers")
+    cls = diffusers.DDPMScheduler if sampler == "ddpm" else diffusers.DDIMScheduler
+    return cls(num_train_timesteps=cfg.timesteps, beta_start=cfg.beta_start, beta_end=cfg.beta_end,
+               beta_schedule="linear", prediction_type=cfg.prediction, clip_sample=cfg.clip > 0,
+               clip_sample_range=cfg.clip if cfg.clip > 0 else 1.0)
+
+
+@pytest.mark.parametrize("prediction,clip", [("epsilon", 1.0), ("sample", 0.0)])
+def test_schedule_and_steps_equal_diffusers(prediction, clip):
+    """Our schedule, forward process, timestep spacing, DDPM step (given the same noise) and DDIM step
+    (eta 0) against diffusers' DDPMScheduler and DDIMScheduler."""
+    cfg = DiffusionConfig(prediction=prediction, clip=clip, beta_end=0.02 if prediction == "epsilon" else 0.01)
+    ours = NoiseSchedule(cfg)
+    torch.testing.assert_close(ours.alphas_cumprod, _diffusers_scheduler(cfg, "ddpm").alphas_cumprod, atol=1e-6, rtol=1e-5)
+    x0, noise, t = torch.randn(5, 7), torch.randn(5, 7), torch.tensor([0, 1, 250, 998, 999])
+    torch.testing.assert_close(ours.q_sample(x0, noise, t), _diffusers_scheduler(cfg, "ddpm").add_noise(x0, noise, t),
+                               atol=1e-5, rtol=1e-5)
+    for sampler, n in (("ddpm", 50), ("ddim", 20), ("ddim", 1)):
+        ref = _diffusers_scheduler(cfg, sampler)
+        ref.set_timesteps(n)
+        steps = ours.inference_timesteps(n)
+        assert steps == [int(t) for t in ref.timesteps]
         x, out = torch.randn(4, 7), torch.randn(4, 7)
-        for t in (int(sched.timesteps[0]), int(sched.timesteps[25]), 0):
-            g = torch.Generator().manual_seed(t)
-            ref = sched.step(out, t, x, generator=g).prev_sample
-            noise = torch.randn(4, 7, generator=torch.Generator().manual_seed(t))
-            torch.testing.assert_close(_ddpm_with_noise(sched, out, t, x, noise), ref, atol=1e-5, rtol=1e-5)
+        for i in (0, len(steps) // 2, len(steps) - 1):
+            t, prev = steps[i], steps[i] - cfg.timesteps // n
+            if sampler == "ddpm":
+                want = ref.step(out, t, x, generator=torch.Generator().manual_seed(t)).prev_sample
+                got = ours.ddpm_step(out, t, prev, x, torch.randn(4, 7, generator=torch.Generator().manual_seed(t)))
+            else:
+                want, got = ref.step(out, t, x, eta=0.0).prev_sample, ours.ddim_step(out, t, prev, x)
+            torch.testing.assert_close(got, want, atol=1e-4, rtol=1e-4)
+    with pytest.raises(ValueError, match="steps"):
+        ours.inference_timesteps(0)
+    with pytest.raises(ValueError, match="prediction"):
+        NoiseSchedule(DiffusionConfig(prediction="v"))
+
+
+def test_ema_and_cosine_schedule_equal_diffusers():
+    """The training helpers against diffusers' EMAModel and get_cosine_schedule_with_warmup."""
+    pytest.importorskip("diffusers")
+    from diffusers.optimization import get_cosine_schedule_with_warmup
+    from diffusers.training_utils import EMAModel
+
+    torch.manual_seed(0)
+    net = nn.Linear(3, 2)
+    ours, ref = EMA(net.parameters(), 0.99), EMAModel(net.parameters(), decay=0.99)
+    opt_a = torch.optim.SGD(net.parameters(), lr=0.1)
+    opt_b = torch.optim.SGD(nn.Linear(3, 2).parameters(), lr=0.1)
+    lr_a, lr_b = cosine_with_warmup(opt_a, 5, 40), get_cosine_schedule_with_warmup(opt_b, 5, 40)
+    for _ in range(40):
+        with torch.no_grad():
+            for p in net.parameters():
+                p.add_(torch.randn_like(p))
+        ours.step(net.parameters())
+        ref.step(net.parameters())
+        opt_a.step()  # no gradients: only keeps the schedulers' call order
+        opt_b.step()
+        lr_a.step()
+        lr_b.step()
+        assert lr_a.get_last_lr() == pytest.approx(lr_b.get_last_lr(), abs=1e-12)
+    for a, b in zip(ours.shadow, ref.shadow_params):
+        torch.testing.assert_close(a, b, atol=1e-6, rtol=1e-6)
+    copy = EMA(net.parameters(), 0.5)
+    copy.load_state_dict(ours.state_dict())
+    copy.copy_to(net.parameters())
+    torch.testing.assert_close(net.weight, ours.shadow[0])
 
 
 def test_timestep_embedding_distinguishes_steps():
@@ -47,7 +105,7 @@ def test_diffusion_learns_a_two_mode_distribution():
     modes are used about equally, and an untrained network does not pass the same checks."""
     torch.manual_seed(0)
     cfg = DiffusionConfig(prediction="epsilon", clip=1.0)
-    sched = make_scheduler(cfg)
+    sched = NoiseSchedule(cfg)
     net = _Denoiser()
     g = torch.Generator().manual_seed(0)
 
@@ -67,7 +125,7 @@ def test_diffusion_learns_a_two_mode_distribution():
         x0 = data(256)
         t = torch.randint(0, cfg.timesteps, (256,), generator=g)
         noise = torch.randn(256, 2, generator=g)
-        loss = ((net(sched.add_noise(x0, noise, t), t) - noise) ** 2).mean()
+        loss = ((net(sched.q_sample(x0, noise, t), t) - noise) ** 2).mean()
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -89,7 +147,7 @@ def test_contact_diffuser_overfits_one_batch_and_reloads_to_identical_samples(tm
     torch.manual_seed(0)
     model = ContactDiffuser(ContactDiffuserConfig(d_model=32, n_blocks=1, pointnet=SMALL_PN))
     batch = _contact_batch()
-    sched = make_scheduler(model.diffusion)
+    sched = NoiseSchedule(model.diffusion)
     opt = torch.optim.AdamW(model.parameters(), lr=2e-3)
     g = torch.Generator().manual_seed(0)
     x0 = 2 * batch["contact"] - 1
@@ -98,7 +156,7 @@ def test_contact_diffuser_overfits_one_batch_and_reloads_to_identical_samples(tm
     losses = []
     for _ in range(150):  # the same noise and steps every time: a pure memorisation test
         cond = model.condition(batch["points"], batch["normals"], batch["d_init"], batch["d_goal"])
-        loss = ((model(sched.add_noise(x0, noise, t), t, cond) - noise) ** 2).mean()
+        loss = ((model(sched.q_sample(x0, noise, t), t, cond) - noise) ** 2).mean()
         opt.zero_grad()
         loss.backward()
         opt.step()

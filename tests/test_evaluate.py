@@ -132,7 +132,7 @@ def test_reference_grasps_evaluate_collision_free_at_both_poses(built, tmp_path)
     mesh = trimesh.load(tmp / "objects/brick-cube/mesh.obj", force="mesh")
     mesh.export(tmp / "objects/brick-cube/collision.obj")  # the cube is convex: its own decomposition
     rows = evaluate_predictions(tmp_path / "dataset.zarr", [tmp / "scenes/brick-cube.zarr"], tmp / "objects",
-                                tmp / "objects/supports/supports.json", hand, {"gravity_direction": "fixed"})
+                                tmp / "objects/supports/supports.json", hand.assets, {"gravity_direction": "fixed"})
     assert len(rows) == sh.n_configs * 4 and list(rows.columns) == list(COLUMNS)
     assert (rows.init_opp == 0).all() and (rows.goal_opp == 0).all()
     assert (rows.pv == 0).all() and (rows.contact_distance > 0).all()  # 5 mm above the top face

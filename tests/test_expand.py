@@ -62,7 +62,7 @@ def test_expansion_keeps_a_clear_grasp_and_drops_one_in_an_obstacle_or_the_table
     top = cube.vertices[:, 2].max()
     grasp[0, 2] += top + 0.01 - low[0]
     grasp[1, 2] += top - 0.08 - low[1]
-    out = expand_configurations(_scene(None), grasp, hand, tmp_path, supports, ExpansionSettings(0.002))
+    out = expand_configurations(_scene(None), grasp, hand.assets, tmp_path, supports, ExpansionSettings(0.002))
     assert out["prior_index"].tolist() == [0] and out["kept_per_config"].tolist() == [1]
     # An obstacle right where the kept hand is at the initial pose (the hand spans ~10 cm around the
     # wrist): now nothing is kept.
@@ -74,11 +74,11 @@ def test_expansion_keeps_a_clear_grasp_and_drops_one_in_an_obstacle_or_the_table
     blocked.obstacle_offsets = np.array([0, 1], np.int64)
     blocked.obstacle_id = np.zeros(1, np.int32)
     blocked.obstacle_pose = np.array([[*centre, 0, 0, 0, 1.0]])
-    out = expand_configurations(blocked, grasp, hand, tmp_path, supports, ExpansionSettings(0.002))
+    out = expand_configurations(blocked, grasp, hand.assets, tmp_path, supports, ExpansionSettings(0.002))
     assert out["kept_per_config"].tolist() == [0]
     # World-frame grasps of the kept hand: at the goal, the hand moved with the cube by 0.3 m in x.
-    out = expand_configurations(_scene(None), grasp, hand, tmp_path, supports, ExpansionSettings(0.002))
+    out = expand_configurations(_scene(None), grasp, hand.assets, tmp_path, supports, ExpansionSettings(0.002))
     np.testing.assert_allclose(out["grasp_goal"][0, :3] - out["grasp_init"][0, :3], [0.3, 0, 0], atol=1e-6)
     # No accepted prior grasp: no task grasp, every configuration counted.
-    none = expand_configurations(_scene(None), grasp[:0], hand, tmp_path, supports, ExpansionSettings(0.002))
+    none = expand_configurations(_scene(None), grasp[:0], hand.assets, tmp_path, supports, ExpansionSettings(0.002))
     assert none["grasp_init"].shape == (0, 51) and none["kept_per_config"].tolist() == [0]

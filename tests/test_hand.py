@@ -172,9 +172,36 @@ def test_shared_shape_fast_path_equals_the_general_path(hand):
     torch.testing.assert_close(a.vertices, b.vertices, atol=1e-12, rtol=0)
 
 
+@pytest.mark.parametrize("which", ["hand", "mano_hand"])
+def test_numpy_vertices_equal_the_torch_model(which, request):
+    """HandAssets.vertices (torch-free jobs) poses the mesh exactly like HandModel, MANO's pose blend
+    shapes included; zero angles and a single hand too."""
+    model = request.getfixturevalue(which)
+    pose = _random_pose(6, 11, scale=0.6)
+    pose[0, 3:] = 0.0
+    want = model(pose).vertices.numpy()
+    got = model.assets.vertices(pose.numpy())
+    assert got.shape == want.shape and got.dtype == np.float64
+    np.testing.assert_allclose(got, want, atol=1e-12, rtol=0)
+    np.testing.assert_allclose(model.assets.vertices(pose[2:3].numpy()), want[2:3], atol=1e-12, rtol=0)
+    with pytest.raises(ValueError, match="51"):
+        model.assets.vertices(np.zeros((2, 48)))
+
+
+def test_hand_assets_load_without_torch():
+    """Reading hand assets must not import torch (task-expansion jobs rely on it for their start-up)."""
+    import subprocess
+    import sys
+
+    code = "import sys; from tohgs.hand import HandAssets, load_hand_assets; assert 'torch' not in sys.modules"
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
 def test_assets_save_and_load(anny_assets, tmp_path):
     anny_assets.save(tmp_path / "hand.npz")
     back = load_hand_assets_file(tmp_path / "hand.npz")
+    back.save(tmp_path / "again.npz")  # the same assets, the same bytes
+    assert (tmp_path / "again.npz").read_bytes() == (tmp_path / "hand.npz").read_bytes()
     np.testing.assert_array_equal(back.rest_vertices, anny_assets.rest_vertices)
     assert sorted(back.presets) == sorted(anny_assets.presets)
     (tmp_path / "bad.npz").write_bytes(b"nope")

@@ -107,13 +107,13 @@ def built(tmp_path_factory):
     grasp[:, 0] += [-0.01, 0.0, 0.01]
     from tohgs.assets.supports import read_supports
 
-    out = expand_configurations(two, grasp, hand, tmp / "objects", read_supports(tmp / "objects/supports/supports.json"),
+    out = expand_configurations(two, grasp, hand.assets, tmp / "objects", read_supports(tmp / "objects/supports/supports.json"),
                                 ExpansionSettings())
     (tmp / "task").mkdir()
     write_task_grasps(out, {"task": "placing", "object": "brick-cube"}, tmp / "task" / "brick-cube.zarr")
     kw = dict(task="placing", split="train", n_shards=1, objects=["brick-cube"], scenes_dir=tmp / "scenes",
               task_grasps_dir=tmp / "task", objects_dir=tmp / "objects",
-              supports_json=tmp / "objects/supports/supports.json", hand=hand,
+              supports_json=tmp / "objects/supports/supports.json", hand=hand.assets,
               settings={"n_points": 256, "n_scene_points": 600, "scene_radius": 0.15}, test_configs=10, seed=0)
     shard = make_map_shard(shard=0, out=tmp / "shard-0.zarr", **kw)
     return tmp, hand, shard, kw, cube

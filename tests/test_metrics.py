@@ -33,6 +33,20 @@ def test_surface_voxels_cover_the_surface_only(cube):
     assert np.abs(vox).max(1).min() > 0.018
 
 
+def test_surface_voxels_cache_returns_the_same_voxels_and_heals(cube, tmp_path):
+    mesh, _, vox = cube
+    first = surface_voxels(mesh, cache_dir=tmp_path)
+    (entry,) = (tmp_path / "voxels").glob("*.npy")
+    np.testing.assert_array_equal(first, vox)
+    np.testing.assert_array_equal(surface_voxels(mesh, cache_dir=tmp_path), vox)  # read back
+    assert len(list((tmp_path / "voxels").glob("*.npy"))) == 1
+    surface_voxels(mesh, pitch=0.002, cache_dir=tmp_path)  # another pitch, another entry
+    assert len(list((tmp_path / "voxels").glob("*.npy"))) == 2
+    entry.write_bytes(b"damaged")
+    np.testing.assert_array_equal(surface_voxels(mesh, cache_dir=tmp_path), vox)
+    np.testing.assert_array_equal(np.load(entry), vox)  # replaced
+
+
 def test_pv_is_zero_clear_of_the_object_and_grows_as_the_hand_sinks_in(cube):
     mesh, _, vox = cube
     slab_depths = [-0.005, 0.0005, 0.003, 0.008, 0.015]  # how far the slab's top rises above the cube's bottom

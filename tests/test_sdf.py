@@ -7,7 +7,8 @@ import pytest
 import torch
 
 from tohgs.assets.bricks import make_brick
-from tohgs.geometry.sdf import SDFGrid, exact_signed_distance
+from tohgs.geometry.raycast import exact_signed_distance
+from tohgs.geometry.sdf import SDFGrid
 
 
 @pytest.fixture(scope="module")

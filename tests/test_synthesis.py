@@ -37,7 +37,7 @@ def test_initial_hands_face_the_object_from_outside(setup):
     assert pose.shape == (16, 51) and contact.shape == (16, s.n_contact)
     with torch.no_grad():
         v = hand(pose).vertices
-    palm = v[:, hand.contact_ids[-8:]].mean(1)
+    palm = v[:, hand.assets.palm_ids].mean(1)
     d = sdf(palm)
     assert (d > 0).all() and (d < 0.04 + 0.03).all()  # outside, within the initial distance (plus the cube's corners)
     # The palm normal (the hand's -y turned by the global rotation) points at the object.

@@ -168,7 +168,7 @@ def _n_scenes(smoke_run) -> int:
     return len(list((smoke_run / "results/scenes").glob("*/*.zarr")))
 
 
-N_MAPS = 9  # 3 tasks x (1 train + 1 val + 1 test) shards in the smoke config
+N_MAPS = 6  # 3 tasks x (1 train + 1 test) shards in the smoke config (no validation shards)
 MODELS = {"train": 6, "predict": 3}  # 3 tasks x 2 models; 3 tasks x the predicted method (ours)
 # The evaluation of every task's predictions: 3 tasks x 2 table methods (dataset, ours).
 EVALUATION = {"reference_grasps": 3, "evaluate": 6, "table1": 1, "predictions_figure": 3, "contact_maps_figure": 1}

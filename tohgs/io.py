@@ -1,4 +1,4 @@
-"""Small I/O helpers shared by every stage: atomic writes and logging set-up.
+"""Small I/O helpers shared by every stage: atomic writes, content keys for caches, logging set-up.
 
 A job writes into a temporary sibling path and renames it into place at the end, so a killed job never
 leaves an output that looks complete.
@@ -7,6 +7,7 @@ leaves an output that looks complete.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import logging
 import os
@@ -53,6 +54,21 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     except BaseException:
         tmp_path.unlink(missing_ok=True)
         raise
+
+
+def content_key(*parts: Any) -> str:
+    """A cache key by content: the sha256 of arrays (dtype, shape and bytes) and JSON-able values, in order."""
+    import numpy as np
+
+    h = hashlib.sha256()
+    for part in parts:
+        if isinstance(part, np.ndarray):
+            a = np.ascontiguousarray(part)
+            h.update(f"{a.dtype.str}{a.shape}".encode())
+            h.update(a.tobytes())
+        else:
+            h.update(json.dumps(part, sort_keys=True).encode())
+    return h.hexdigest()
 
 
 def write_text(path: str | Path, text: str) -> None:

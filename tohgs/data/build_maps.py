@@ -22,13 +22,12 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-import torch
 import trimesh
 
 from tohgs.data.maps import MapShard, write_map_shard
 from tohgs.geometry.maps import nearest_distance, normalised_map, sample_surface, scene_cloud
 from tohgs.grasps.expand import pose_matrix, scene_meshes
-from tohgs.hand.model import HandModel
+from tohgs.hand.assets import HandAssets
 
 log = logging.getLogger(__name__)
 
@@ -61,7 +60,7 @@ def _object_cloud(objects_dir: Path, name: str, n: int, seed: int) -> tuple[np.n
 
 
 def make_map_shard(task: str, split: str, shard: int, n_shards: int, objects: list[str], scenes_dir: str | Path,
-                   task_grasps_dir: str | Path, objects_dir: str | Path, supports_json: str | Path, hand: HandModel,
+                   task_grasps_dir: str | Path, objects_dir: str | Path, supports_json: str | Path, hand: HandAssets,
                    settings: dict, test_configs: int, seed: int, out: str | Path) -> MapShard:
     """Build and write shard ``shard`` of ``n_shards`` of one task and split.
 
@@ -70,7 +69,8 @@ def make_map_shard(task: str, split: str, shard: int, n_shards: int, objects: li
         objects: the split's target objects.
         scenes_dir, task_grasps_dir: ``results/scenes/<task>`` and ``results/grasps/task/<task>``.
         objects_dir, supports_json: the objects stage's outputs.
-        hand: the hand model (for contact maps).
+        hand: the hand's assets (contact maps pose it with :meth:`~tohgs.hand.assets.HandAssets.vertices`;
+            the job imports no torch).
         settings: a config mapping of :class:`MapSettings`.
         test_configs: configurations per test object.
         seed: the global seed.
@@ -87,7 +87,7 @@ def make_map_shard(task: str, split: str, shard: int, n_shards: int, objects: li
     grasps = {o: read_task_grasps(Path(task_grasps_dir) / f"{o}.zarr")[0] for o in objects}
     items = shard_items({o: len(sc) for o, sc in scenes.items()}, split, test_configs, n_shards, shard)
     vocab = sorted(objects)
-    wrist = hand.rest_joints[0].cpu().numpy().astype(np.float64)
+    wrist = np.asarray(hand.rest_joints[0], dtype=np.float64)
     clouds: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     mesh_cache: dict[str, trimesh.Trimesh] = {}
     cfg_rows: dict[str, list] = {k: [] for k in ("object_id", "config_index", "points", "normals", "d_init", "d_goal",
@@ -127,8 +127,7 @@ def make_map_shard(task: str, split: str, shard: int, n_shards: int, objects: li
             sel = sel[: s.max_grasps_per_config]
         if len(sel):
             world = g["grasp_init"][sel].astype(np.float64)
-            with torch.no_grad():
-                hv = hand(torch.as_tensor(world, dtype=hand.rest_vertices.dtype)).vertices.cpu().numpy()
+            hv = hand.vertices(world)  # (K, V, 3)
             for j, k in enumerate(sel):
                 g_rows["contact"].append(normalised_map(nearest_distance(p_init, hv[j]), s.alpha_contact))
             local = world.copy()

@@ -15,23 +15,7 @@ import numpy as np
 import torch
 import trimesh
 
-
-def raycasting_scene(vertices: np.ndarray, faces: np.ndarray):
-    """An open3d ray-casting scene of one triangle mesh ((V, 3) metres, (F, 3)): distances, occupancy."""
-    import open3d as o3d
-
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(vertices, dtype=np.float32)),
-                        o3d.core.Tensor(np.ascontiguousarray(faces, dtype=np.uint32)))
-    return scene
-
-
-def exact_signed_distance(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
-    """Exact signed distance of (N, 3) points to a watertight mesh (negative inside), metres."""
-    import open3d as o3d
-
-    pts = o3d.core.Tensor(np.ascontiguousarray(points, dtype=np.float32))
-    return raycasting_scene(mesh.vertices, mesh.faces).compute_signed_distance(pts).numpy().astype(np.float64)
+from tohgs.geometry.raycast import exact_signed_distance
 
 
 @dataclass

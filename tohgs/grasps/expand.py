@@ -5,6 +5,9 @@ mesh frame) is placed with the target at its initial pose and carried rigidly to
 is kept for that configuration if, at both poses, no hand vertex lies deeper than ``tolerance`` inside a
 scene mesh other than the target (the table or shelf, the obstacles, the base brick). Inside-ness is
 open3d's ray-casting occupancy; the depth is the unsigned distance to the scene's surface.
+
+The hand meshes come from :meth:`tohgs.hand.assets.HandAssets.vertices`, so a task-expansion job never
+imports torch (its start-up was most of the job's time).
 """
 
 from __future__ import annotations
@@ -14,11 +17,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import torch
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from tohgs.hand.model import HandModel
+from tohgs.hand.assets import HandAssets
 
 log = logging.getLogger(__name__)
 
@@ -83,7 +85,7 @@ class SceneCollider:
     """Occupancy and depth queries against a set of closed world-frame meshes (open3d ray casting)."""
 
     def __init__(self, meshes: list[trimesh.Trimesh]):
-        from tohgs.geometry.sdf import raycasting_scene
+        from tohgs.geometry.raycast import raycasting_scene
 
         merged = trimesh.util.concatenate(meshes)
         self.scene = raycasting_scene(merged.vertices, merged.faces)
@@ -115,14 +117,14 @@ def collision_free(hand_vertices: np.ndarray, collider: SceneCollider, tolerance
     return depth.max(1) <= tolerance
 
 
-def expand_configurations(scenes, prior_pose: np.ndarray, hand: HandModel, objects_dir: str | Path, supports: dict,
+def expand_configurations(scenes, prior_pose: np.ndarray, hand: HandAssets, objects_dir: str | Path, supports: dict,
                           settings: ExpansionSettings) -> dict[str, np.ndarray]:
     """Task grasps of every configuration of one scene set.
 
     Args:
         scenes: a :class:`~tohgs.data.scenes.SceneSet`.
         prior_pose: (A, 51) accepted prior grasps in the target's mesh frame.
-        hand: the hand model.
+        hand: the hand's assets (a :class:`~tohgs.hand.model.HandModel` has them as ``.assets``).
         objects_dir: the objects stage's folder.
         supports: the supports by name.
         settings: the collision tolerance.
@@ -136,9 +138,8 @@ def expand_configurations(scenes, prior_pose: np.ndarray, hand: HandModel, objec
         return {"config": np.zeros(0, np.int32), "prior_index": np.zeros(0, np.int32),
                 "grasp_init": np.zeros((0, 51), np.float32), "grasp_goal": np.zeros((0, 51), np.float32),
                 "kept_per_config": np.zeros(len(scenes), np.int64)}
-    with torch.no_grad():
-        local = hand(torch.as_tensor(prior_pose, dtype=hand.rest_vertices.dtype)).vertices.cpu().numpy().astype(np.float64)
-    wrist = hand.rest_joints[0].cpu().numpy().astype(np.float64)
+    local = hand.vertices(prior_pose)  # (A, V, 3) in the target's mesh frame
+    wrist = np.asarray(hand.rest_joints[0], dtype=np.float64)
     cache: dict[str, trimesh.Trimesh] = {}
     rows: dict[str, list] = {"config": [], "prior_index": [], "grasp_init": [], "grasp_goal": []}
     kept = np.zeros(len(scenes), dtype=np.int64)
@@ -164,7 +165,7 @@ def expand_configurations(scenes, prior_pose: np.ndarray, hand: HandModel, objec
 
 
 def make_task_grasps(scene_store: str | Path, prior_store: str | Path, objects_dir: str | Path,
-                     supports_json: str | Path, hand: HandModel, settings: dict, out: str | Path) -> dict[str, np.ndarray]:
+                     supports_json: str | Path, hand: HandAssets, settings: dict, out: str | Path) -> dict[str, np.ndarray]:
     """The task grasps of one task and target object: expand its accepted prior grasps over its scene
     configurations and write ``out`` (:mod:`tohgs.data.task_grasps`)."""
     from tohgs.assets.supports import read_supports

@@ -11,8 +11,6 @@ Two steps, two workflow rules, so that a threshold change reruns only the cheap 
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 import time
 import zlib
@@ -30,6 +28,7 @@ from tohgs.geometry.sdf import SDFGrid
 from tohgs.grasps.filter import filter_prior_grasps  # noqa: F401  (re-exported: the stage's second step)
 from tohgs.grasps.synthesis import SynthesisSettings, synthesize
 from tohgs.hand.model import HandModel
+from tohgs.io import content_key
 from tohgs.metrics.quality import (DisplacementSimulator, SDSettings, contact_distance, sd_gravity,
                                    penetration_volume, surface_voxels)
 
@@ -45,13 +44,10 @@ class SDFSettings:
 
 
 def object_sdf(mesh: trimesh.Trimesh, settings: SDFSettings, cache_dir: str | Path | None = None) -> SDFGrid:
-    """The SDF grid of ``mesh``, cached under ``<cache_dir>/sdf/<sha256>.npz`` (keyed by the mesh's
-    vertices and faces and the settings)."""
-    h = hashlib.sha256()
-    h.update(np.ascontiguousarray(mesh.vertices, dtype=np.float64).tobytes())
-    h.update(np.ascontiguousarray(mesh.faces, dtype=np.int64).tobytes())
-    h.update(json.dumps(asdict(settings), sort_keys=True).encode())
-    path = Path(cache_dir) / "sdf" / f"{h.hexdigest()}.npz" if cache_dir is not None else None
+    """The SDF grid of ``mesh``, cached under ``<cache_dir>/sdf/<key>.npz`` (keyed by the mesh's vertices
+    and faces and the settings)."""
+    key = content_key(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64), asdict(settings))
+    path = Path(cache_dir) / "sdf" / f"{key}.npz" if cache_dir is not None else None
     if path is not None and path.is_file():
         try:
             return SDFGrid.load(path)
@@ -70,14 +66,15 @@ def object_seed(seed: int, name: str) -> int:
 
 
 def evaluate_grasps(hand: HandModel, pose: np.ndarray, mesh: trimesh.Trimesh, collision_obj: str | Path,
-                    sd_settings: SDSettings, voxel_pitch: float = 0.001, progress: bool = False
-                    ) -> dict[str, np.ndarray]:
+                    sd_settings: SDSettings, voxel_pitch: float = 0.001, progress: bool = False,
+                    cache_dir: str | Path | None = None) -> dict[str, np.ndarray]:
     """PV (m^3), SD (m) and contact distance (m) of (B, 51) grasps of one object in its mesh frame; SD's
-    gravity per grasp as ``sd_settings.gravity_direction`` says (:func:`palm_gravity` by default)."""
+    gravity per grasp as ``sd_settings.gravity_direction`` says (:func:`palm_gravity` by default); the
+    object's surface voxels are cached under ``cache_dir``."""
     with torch.no_grad():
         verts = hand(torch.as_tensor(pose, dtype=hand.rest_vertices.dtype)).vertices.cpu().numpy().astype(np.float64)
     faces = hand.closed_faces.cpu().numpy()
-    pv = penetration_volume(verts, faces, surface_voxels(mesh, voxel_pitch), voxel_pitch)
+    pv = penetration_volume(verts, faces, surface_voxels(mesh, voxel_pitch, cache_dir), voxel_pitch)
     cd = contact_distance(verts, mesh)
     it = range(len(verts))
     if progress:
@@ -85,7 +82,7 @@ def evaluate_grasps(hand: HandModel, pose: np.ndarray, mesh: trimesh.Trimesh, co
 
         it = tqdm(it, desc="SD", mininterval=5.0)
     centre = np.asarray(mesh.vertices).mean(0)
-    palm = verts[:, hand.contact_ids[-8:].cpu().numpy()].mean(1)  # the 8 palm candidates
+    palm = verts[:, hand.assets.palm_ids].mean(1)  # the palm centre
     gravity = sd_gravity(sd_settings, palm, centre)
     with DisplacementSimulator(collision_obj, centre, sd_settings) as sim:
         sd = np.array([sim.displacement(verts[i], faces, gravity=gravity[i]) for i in it])
@@ -106,7 +103,7 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
         plane_direction: ``"random"`` (objects) or ``"down"`` (bricks), see :func:`support_planes`.
         seed: the global seed (combined with the object's name).
         out: the raw store to write.
-        cache_dir: cache root for SDF grids (None: no cache).
+        cache_dir: cache root for SDF grids and surface voxels (None: no cache).
         threads: torch threads.
     """
     torch.set_num_threads(max(1, int(threads)))
@@ -133,7 +130,8 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
              result.history[-1], timing["synthesis"])
     t0 = time.perf_counter()
     pose = result.pose.cpu().numpy()
-    metrics = evaluate_grasps(hand, pose, mesh, object_dir / "collision.obj", s_sd, voxel_pitch, progress=True)
+    metrics = evaluate_grasps(hand, pose, mesh, object_dir / "collision.obj", s_sd, voxel_pitch, progress=True,
+                              cache_dir=cache_dir)
     timing["metrics"] = time.perf_counter() - t0
     log.info("%s: PV median %.2f cm^3, SD median %.2f cm, metrics in %.1f s", name,
              float(np.median(metrics["pv"])) * 1e6, float(np.median(metrics["sd"])) * 100, timing["metrics"])

@@ -239,7 +239,7 @@ def initial_grasps(hand: HandModel, vertices: np.ndarray, settings: SynthesisSet
     pose[:, 3:6] = matrix_to_axis_angle(rot)
     with torch.no_grad():
         rest = hand(torch.cat([torch.zeros(b, 6, dtype=dtype), pose[:, 6:]], 1)).vertices
-    palm = rest[:, hand.contact_ids[-8:]].mean(1)  # the palm candidates, in the unrotated hand
+    palm = rest[:, hand.assets.palm_ids].mean(1)  # the palm centre, in the unrotated hand
     j0 = hand.rest_joints[0]
     pose[:, :3] = palm_target - j0 - ((rot @ (palm - j0)[..., None])[..., 0])
     n_cand = len(hand.contact_ids)

@@ -7,10 +7,23 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from tohgs.hand.model import HandAssets, HandModel, HandOutput
+from tohgs.hand.assets import HandAssets
+
+if TYPE_CHECKING:
+    from tohgs.hand.model import HandModel, HandOutput
 
 __all__ = ["HandAssets", "HandModel", "HandOutput", "load_hand", "load_hand_assets"]
+
+
+def __getattr__(name: str):
+    """``HandModel`` and ``HandOutput`` load torch on first use, so torch-free jobs can read hand assets."""
+    if name in ("HandModel", "HandOutput"):
+        from tohgs.hand import model
+
+        return getattr(model, name)
+    raise AttributeError(f"module 'tohgs.hand' has no attribute {name!r}")
 
 
 def load_hand_assets(model: str = "anny", mano_path: str | Path | None = None,
@@ -32,4 +45,6 @@ def load_hand_assets(model: str = "anny", mano_path: str | Path | None = None,
 def load_hand(model: str = "anny", mano_path: str | Path | None = None, cache_dir: str | Path | None = None,
               device: str = "cpu") -> HandModel:
     """A ready :class:`HandModel` of backend ``model`` on ``device``."""
+    from tohgs.hand.model import HandModel
+
     return HandModel(load_hand_assets(model, mano_path, cache_dir)).to(device)

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from tohgs.hand.layout import PARENTS
-from tohgs.hand.model import HandAssets
+from tohgs.hand.assets import HandAssets
 
 log = logging.getLogger(__name__)
 
@@ -226,7 +226,7 @@ def _code_hash() -> str:
 
     here = Path(__file__).resolve().parent
     h = hashlib.sha256()
-    for name in ("anny_backend.py", "derived.py", "layout.py", "model.py"):
+    for name in ("anny_backend.py", "assets.py", "derived.py", "layout.py"):
         h.update((here / name).read_bytes())
     return h.hexdigest()[:12]
 

@@ -21,7 +21,7 @@ import numpy as np
 import trimesh
 
 from tohgs.hand.layout import FINGERS, N_JOINTS, PARENTS, TIP_ORDER, children
-from tohgs.hand.model import HandAssets
+from tohgs.hand.assets import PALM_CONTACTS, HandAssets
 
 PALM_NORMAL = np.array([0.0, -1.0, 0.0])
 
@@ -47,7 +47,7 @@ PRESET_FLEXION = {
 PRESET_THUMB_ABDUCTION = {"flat": 0, "relaxed": 10, "power": 32, "pinch": 38}
 #: Contact candidates per finger level (joint 1, 2, 3) and on the palm.
 CONTACT_COUNTS = {"thumb": (4, 5, 5), "index": (6, 6, 5), "middle": (6, 6, 5), "ring": (6, 6, 5),
-                  "pinky": (4, 4, 3), "palm": 8}
+                  "pinky": (4, 4, 3), "palm": PALM_CONTACTS}
 
 
 def seal_wrist(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from tohgs.hand.model import HandAssets
+from tohgs.hand.assets import HandAssets
 
 #: Globals the MANO pickle may name, and what they become.
 _NUMPY_GLOBALS = {

@@ -13,122 +13,17 @@ translation is added last (it moves every vertex by exactly itself).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
-from pathlib import Path
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 import torch
 
+from tohgs.hand.assets import LEVELS as _LEVELS
+from tohgs.hand.assets import HandAssets
 from tohgs.hand.layout import N_BETAS, N_JOINTS, PARENTS, POSE_DIM
 from tohgs.hand.rotations import axis_angle_to_matrix
 
-#: Joints grouped by depth in the tree (wrist; first, second, third phalanges), for batched chaining.
-_LEVELS = ((0,), (1, 4, 7, 10, 13), (2, 5, 8, 11, 14), (3, 6, 9, 12, 15))
-
-
-@dataclass
-class HandAssets:
-    """Everything a backend provides, in MANO's canonical frame (metres, radians).
-
-    Attributes:
-        name: backend name (``anny`` or ``mano``).
-        rest_vertices: (V, 3) flat-hand vertices at zero betas.
-        shape_dirs: (V, 3, 10) vertex offsets per beta.
-        pose_dirs: (V, 3, 135) pose blend shapes on (R - I) of the 15 finger joints, or ``None``.
-        rest_joints: (16, 3) joint centres at zero betas.
-        joint_shape_dirs: (16, 3, 10) joint offsets per beta.
-        weights: (V, 16) skinning weights, rows sum to 1.
-        faces: (F, 3) triangles as the model has them (open at the wrist).
-        closed_faces: (F', 3) faces with the wrist sealed: a watertight closed surface.
-        part_labels: (V,) in [0, 16): the joint with the largest skinning weight.
-        tip_ids: (5,) fingertip vertex ids, in :data:`tohgs.hand.layout.TIP_ORDER`.
-        contact_ids: (C,) palm-side contact-candidate vertex ids.
-        joint_limits: (15, 3, 2) anatomical [min, max] per finger joint and canonical axis, radians.
-        prior_mean, prior_std: (45,) pose prior of the finger parameters.
-        presets: named (51,) pose vectors (``flat``, ``relaxed``, ``power``, ``pinch``).
-        meta: provenance (versions, shape mapping) for the record.
-    """
-
-    name: str
-    rest_vertices: np.ndarray
-    shape_dirs: np.ndarray
-    pose_dirs: np.ndarray | None
-    rest_joints: np.ndarray
-    joint_shape_dirs: np.ndarray
-    weights: np.ndarray
-    faces: np.ndarray
-    closed_faces: np.ndarray
-    part_labels: np.ndarray
-    tip_ids: np.ndarray
-    contact_ids: np.ndarray
-    joint_limits: np.ndarray
-    prior_mean: np.ndarray
-    prior_std: np.ndarray
-    presets: dict[str, np.ndarray] = field(default_factory=dict)
-    meta: dict[str, Any] = field(default_factory=dict)
-
-    def validate(self, source: str = "hand assets") -> None:
-        """Check shapes and basic invariants; raises ``ValueError`` naming ``source`` and the problem."""
-        v = len(self.rest_vertices)
-        expect = {
-            "rest_vertices": (v, 3), "shape_dirs": (v, 3, N_BETAS), "rest_joints": (N_JOINTS, 3),
-            "joint_shape_dirs": (N_JOINTS, 3, N_BETAS), "weights": (v, N_JOINTS), "part_labels": (v,),
-            "tip_ids": (5,), "joint_limits": (15, 3, 2), "prior_mean": (45,), "prior_std": (45,),
-        }
-        if self.pose_dirs is not None:
-            expect["pose_dirs"] = (v, 3, 135)
-        for key, shape in expect.items():
-            got = np.shape(getattr(self, key))
-            if got != shape:
-                raise ValueError(f"{source}: '{key}' has shape {got}, expected {shape}")
-        for key in ("faces", "closed_faces"):
-            f = np.asarray(getattr(self, key))
-            if f.ndim != 2 or f.shape[1] != 3 or f.min() < 0 or f.max() >= v:
-                raise ValueError(f"{source}: '{key}' must be (F, 3) vertex ids in [0, {v})")
-        if not np.allclose(self.weights.sum(1), 1.0, atol=1e-4):
-            raise ValueError(f"{source}: skinning weights do not sum to 1")
-        if not np.isfinite(self.rest_vertices).all():
-            raise ValueError(f"{source}: non-finite rest vertices")
-
-    def save(self, path: str | Path) -> None:
-        """Write to an ``.npz`` (atomically)."""
-        from tohgs.io import atomic_path
-
-        arrays: dict[str, Any] = {}
-        for f in fields(self):
-            val = getattr(self, f.name)
-            if f.name == "presets":
-                for k, p in val.items():
-                    arrays[f"preset__{k}"] = np.asarray(p)
-            elif f.name == "meta":
-                import json
-
-                arrays["meta_json"] = np.array(json.dumps(val))
-            elif val is not None:
-                arrays[f.name] = np.asarray(val)
-        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
-
-    @staticmethod
-    def load(path: str | Path) -> "HandAssets":
-        """Read what :meth:`save` wrote; raises ``ValueError`` naming the file if it is not one."""
-        import json
-
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except Exception as exc:
-            raise ValueError(f"{path}: not a readable hand-assets file ({exc})") from exc
-        presets = {k.split("__", 1)[1]: v for k, v in data.items() if k.startswith("preset__")}
-        kwargs = {f.name: data.get(f.name) for f in fields(HandAssets) if f.name not in ("presets", "meta")}
-        missing = [k for k, v in kwargs.items() if v is None and k != "pose_dirs"]
-        if missing:
-            raise ValueError(f"{path}: hand-assets file lacks {missing}")
-        kwargs["name"] = str(kwargs["name"])
-        assets = HandAssets(**kwargs, presets=presets, meta=json.loads(str(data.get("meta_json", "{}"))))
-        assets.validate(str(path))
-        return assets
+__all__ = ["HandAssets", "HandModel", "HandOutput"]
 
 
 @dataclass

@@ -25,14 +25,13 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import torch
 import trimesh
 
 from tohgs.config import settings_from
 from tohgs.data.predictions import read_predictions
 from tohgs.data.scenes import read_scenes
 from tohgs.grasps.expand import SceneCollider, pose_matrix, scene_meshes
-from tohgs.hand.model import HandModel
+from tohgs.hand.assets import HandAssets
 from tohgs.metrics.quality import (DisplacementSimulator, SDSettings, contact_distance, penetration_volume,
                                    sd_gravity, surface_voxels)
 
@@ -40,13 +39,6 @@ log = logging.getLogger(__name__)
 
 COLUMNS = ("task", "method", "object", "config_index", "sample", "pv", "sd", "contact_distance", "init_opp",
            "goal_opp", "ds", "hand_vertices")
-
-
-def hand_vertices(hand: HandModel, grasps: np.ndarray) -> np.ndarray:
-    """(B, V, 3) float64 vertices of (B, 51) grasp vectors, metres."""
-    with torch.no_grad():
-        v = hand(torch.as_tensor(np.asarray(grasps).reshape(-1, 51), dtype=hand.rest_vertices.dtype)).vertices
-    return v.cpu().numpy().astype(np.float64)
 
 
 def diversity(vertices: np.ndarray) -> float:
@@ -73,14 +65,15 @@ class _ObjectAssets:
     vertex_mean: np.ndarray
 
 
-def _object_assets(objects_dir: Path, name: str, pitch: float, cache: dict) -> _ObjectAssets:
+def _object_assets(objects_dir: Path, name: str, pitch: float, cache: dict, cache_dir: str | Path | None = None
+                   ) -> _ObjectAssets:
     if name not in cache:
         path = objects_dir / name / "mesh.obj"
         try:
             mesh = trimesh.load(path, force="mesh", process=False)
         except Exception as exc:
             raise ValueError(f"{path}: unreadable object mesh ({exc})") from exc
-        cache[name] = _ObjectAssets(mesh, surface_voxels(mesh, pitch), objects_dir / name / "collision.obj",
+        cache[name] = _ObjectAssets(mesh, surface_voxels(mesh, pitch, cache_dir), objects_dir / name / "collision.obj",
                                     np.asarray(mesh.vertices).mean(0))
     return cache[name]
 
@@ -114,8 +107,8 @@ def grasp_metrics(verts_init: np.ndarray, verts_goal: np.ndarray, faces: np.ndar
 
 
 def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | Path], objects_dir: str | Path,
-                         supports_json: str | Path, hand: HandModel, sd: dict, voxel_pitch: float = 0.001,
-                         progress: bool = False) -> pd.DataFrame:
+                         supports_json: str | Path, hand: HandAssets, sd: dict, voxel_pitch: float = 0.001,
+                         cache_dir: str | Path | None = None, progress: bool = False) -> pd.DataFrame:
     """One row per predicted grasp (columns :data:`COLUMNS`) of one task and method.
 
     Args:
@@ -123,9 +116,11 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
         scene_stores: the scene stores of the task's test objects (``results/scenes/<task>/<object>.zarr``).
         objects_dir: the objects stage's folder (``<name>/mesh.obj``, ``<name>/collision.obj``).
         supports_json: the supports file of the objects stage.
-        hand: the hand model the predictions are vectors of.
+        hand: the assets of the hand the predictions are vectors of (posed with
+            :meth:`~tohgs.hand.assets.HandAssets.vertices`, so the job does not import torch).
         sd: a config mapping of :class:`~tohgs.metrics.quality.SDSettings`.
         voxel_pitch: PV's voxel size, m.
+        cache_dir: cache root of the objects' surface voxels (the prior grasps' stage fills it).
         progress: show a progress bar over configurations.
     """
     from tohgs.assets.supports import read_supports
@@ -139,8 +134,7 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
     vocab = list(attrs["objects"])
     supports = read_supports(supports_json)
     objects_dir = Path(objects_dir)
-    faces = hand.closed_faces.cpu().numpy()
-    palm_ids = hand.contact_ids[-8:].cpu().numpy()  # the palm's contact candidates
+    faces = np.asarray(hand.closed_faces)
     assets: dict = {}
     meshes: dict = {}
     rows = []
@@ -159,13 +153,13 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
             sc, c = scenes[name], int(arrays["config_index"][i])
             if not 0 <= c < len(sc):
                 raise ValueError(f"{prediction_store}: configuration index {c} of {name!r} is out of range ({len(sc)})")
-            obj = _object_assets(objects_dir, name, voxel_pitch, assets)
+            obj = _object_assets(objects_dir, name, voxel_pitch, assets, cache_dir)
             if name not in sims:
                 sims[name] = DisplacementSimulator(obj.collision, obj.vertex_mean, s_sd)
             collider = SceneCollider(scene_meshes(sc, c, objects_dir, supports, meshes))
-            v_init = hand_vertices(hand, arrays["grasp_init"][i])
-            v_goal = hand_vertices(hand, arrays["grasp_goal"][i])
-            m = grasp_metrics(v_init, v_goal, faces, palm_ids, obj, sc.target_init_pose[c], collider, s_sd,
+            v_init = hand.vertices(arrays["grasp_init"][i])
+            v_goal = hand.vertices(arrays["grasp_goal"][i])
+            m = grasp_metrics(v_init, v_goal, faces, hand.palm_ids, obj, sc.target_init_pose[c], collider, s_sd,
                               voxel_pitch, sims[name])
             ds = diversity(v_init)
             for k in range(len(v_init)):

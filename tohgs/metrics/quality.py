@@ -25,21 +25,32 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from tohgs.geometry.sdf import exact_signed_distance, raycasting_scene
+from tohgs.geometry.raycast import exact_signed_distance, occupancy
 
 VOXEL_PITCH = 0.001  # m
 
 
-def surface_voxels(mesh: trimesh.Trimesh, pitch: float = VOXEL_PITCH) -> np.ndarray:
-    """(N, 3) centres of the surface voxels of ``mesh`` at ``pitch`` (metres, the mesh's frame)."""
-    return np.asarray(mesh.voxelized(pitch).points, dtype=np.float64)
+def surface_voxels(mesh: trimesh.Trimesh, pitch: float = VOXEL_PITCH, cache_dir: str | Path | None = None) -> np.ndarray:
+    """(N, 3) centres of the surface voxels of ``mesh`` at ``pitch`` (metres, the mesh's frame), as trimesh's
+    ``voxelized`` returns them. That takes seconds per object, so with ``cache_dir`` they are kept under
+    ``<cache_dir>/voxels/<key>.npy`` (keyed by the mesh's vertices and faces and the pitch): the prior-grasp
+    and evaluation jobs of an object share them."""
+    from tohgs.io import atomic_path, content_key
 
-
-def _occupancy(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(N,) bool: which points lie inside the closed mesh (open3d's ray-casting occupancy)."""
-    import open3d as o3d
-
-    return raycasting_scene(vertices, faces).compute_occupancy(o3d.core.Tensor(np.ascontiguousarray(points, dtype=np.float32))).numpy() > 0.5
+    path = None
+    if cache_dir is not None:
+        key = content_key(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64), float(pitch))
+        path = Path(cache_dir) / "voxels" / f"{key}.npy"
+        if path.is_file():
+            try:
+                return np.load(path, allow_pickle=False)
+            except (OSError, ValueError):
+                pass  # a damaged entry is recomputed and replaced
+    voxels = np.asarray(mesh.voxelized(pitch).points, dtype=np.float64)
+    if path is not None:
+        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+            np.save(fh, voxels)
+    return voxels
 
 
 def penetration_volume(hand_vertices: np.ndarray, hand_faces: np.ndarray, voxels: np.ndarray,
@@ -63,7 +74,7 @@ def penetration_volume(hand_vertices: np.ndarray, hand_faces: np.ndarray, voxels
         lo, hi = v.min(0) - pitch, v.max(0) + pitch
         near = voxels[np.all((voxels >= lo) & (voxels <= hi), axis=1)]
         if len(near):
-            out[b] = _occupancy(v, hand_faces, near).sum() * pitch**3
+            out[b] = occupancy(v, hand_faces, near).sum() * pitch**3
     return out[0] if single else out
 
 

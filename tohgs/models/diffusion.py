@@ -1,9 +1,13 @@
-"""Diffusion plumbing shared by both diffusers: schedulers from the ``diffusers`` library, the timestep
-embedding, and the reverse-process sampling loop (full DDPM or DDIM with k steps).
+"""Diffusion plumbing shared by both diffusers: the noise schedule, the timestep embedding, and the
+reverse-process sampling loop (full DDPM or DDIM with k steps).
 
-Schedules and samplers are diffusers' ``DDPMScheduler`` / ``DDIMScheduler`` (linear betas, T = 1000 for
-training), not hand-written: they are tested upstream, and the same scheduler object serves training
-(``add_noise``) and sampling (``step``).
+:class:`NoiseSchedule` is DDPM's linear-beta schedule (T = 1000 for training), computed in float64 and kept
+as float32 tensors, with the forward process (``q_sample``) and the two reverse steps: DDPM's ancestral
+step (posterior variance "fixed small") and DDIM's deterministic step (eta 0). Timesteps are spaced as
+diffusers' ``DDPMScheduler`` / ``DDIMScheduler`` space them ("leading", the final step to alpha-bar 1), and
+the tests check every step against those schedulers when diffusers is installed. The library is not a
+runtime dependency: importing it costs about 4 s (7 s with its EMA helper) in every training and
+prediction job.
 """
 
 from __future__ import annotations
@@ -34,18 +38,74 @@ class DiffusionConfig:
     clip: float = 1.0
 
 
-def make_scheduler(cfg: DiffusionConfig, sampler: str = "ddpm"):
-    """A diffusers scheduler for ``cfg``: ``"ddpm"`` (ancestral, every step) or ``"ddim"`` (eta 0)."""
-    from diffusers import DDIMScheduler, DDPMScheduler
+class NoiseSchedule:
+    """DDPM's linear-beta schedule and its forward and reverse steps.
 
-    kw = dict(num_train_timesteps=cfg.timesteps, beta_start=cfg.beta_start, beta_end=cfg.beta_end,
-              beta_schedule="linear", prediction_type=cfg.prediction, clip_sample=cfg.clip > 0,
-              clip_sample_range=cfg.clip if cfg.clip > 0 else 1.0)
-    if sampler == "ddpm":
-        return DDPMScheduler(**kw)
-    if sampler == "ddim":
-        return DDIMScheduler(**kw)
-    raise ValueError(f"sampler must be 'ddpm' or 'ddim', not {sampler!r}")
+    Attributes:
+        cfg: the :class:`DiffusionConfig`.
+        betas, alphas_cumprod: (T,) float32 (computed in float64): beta_t and alpha-bar_t.
+    """
+
+    def __init__(self, cfg: DiffusionConfig):
+        if cfg.prediction not in ("epsilon", "sample"):
+            raise ValueError(f"prediction must be 'epsilon' or 'sample', not {cfg.prediction!r}")
+        self.cfg = cfg
+        betas = torch.linspace(cfg.beta_start, cfg.beta_end, cfg.timesteps, dtype=torch.float64)
+        self.betas = betas.float()
+        self.alphas_cumprod = torch.cumprod(1.0 - betas, 0).float()
+
+    @property
+    def timesteps(self) -> int:
+        """T, the number of training timesteps."""
+        return self.cfg.timesteps
+
+    def alpha_bar(self, t: int) -> torch.Tensor:
+        """alpha-bar_t as a 0-d tensor; 1 for t < 0 (the clean end of the chain)."""
+        return self.alphas_cumprod[t] if t >= 0 else torch.tensor(1.0)
+
+    def q_sample(self, x0: torch.Tensor, noise: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        """x_t = sqrt(alpha-bar_t) x0 + sqrt(1 - alpha-bar_t) noise for (B, ...) x0, noise and (B,) long t."""
+        a = self.alphas_cumprod.to(x0.device)[t].to(x0.dtype).reshape((-1,) + (1,) * (x0.ndim - 1))
+        return a.sqrt() * x0 + (1 - a).sqrt() * noise
+
+    def inference_timesteps(self, steps: int) -> list[int]:
+        """The ``steps`` timesteps of a reverse pass, descending: ``k * (T // steps)`` for k < steps."""
+        if not 1 <= steps <= self.timesteps:
+            raise ValueError(f"steps must be in 1..{self.timesteps}, not {steps}")
+        ratio = self.timesteps // steps
+        return [k * ratio for k in reversed(range(steps))]
+
+    def predict_x0_eps(self, model_output: torch.Tensor, t: int, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The network's x0 and epsilon estimates at x_t (x0 clamped to [-clip, clip] when ``clip`` > 0;
+        epsilon is the unclamped one)."""
+        a_t = self.alpha_bar(t)
+        if self.cfg.prediction == "epsilon":
+            eps = model_output
+            x0 = (x - (1 - a_t).sqrt() * eps) / a_t.sqrt()
+        else:
+            x0 = model_output
+            eps = (x - a_t.sqrt() * x0) / (1 - a_t).sqrt()
+        if self.cfg.clip > 0:
+            x0 = x0.clamp(-self.cfg.clip, self.cfg.clip)
+        return x0, eps
+
+    def ddpm_step(self, model_output: torch.Tensor, t: int, prev_t: int, x: torch.Tensor, noise: torch.Tensor) -> torch.Tensor:
+        """DDPM's ancestral step x_t -> x_prev_t: the posterior mean (DDPM's eq. 7) plus the "fixed small"
+        posterior standard deviation times ``noise`` (none at t = 0). ``noise`` is the caller's draw, so
+        samples depend only on the caller's generator."""
+        x0, _ = self.predict_x0_eps(model_output, t, x)
+        a_t, a_prev = self.alpha_bar(t), self.alpha_bar(prev_t)
+        beta_t = 1 - a_t / a_prev
+        mean = a_prev.sqrt() * beta_t / (1 - a_t) * x0 + (a_t / a_prev).sqrt() * (1 - a_prev) / (1 - a_t) * x
+        if t > 0:
+            mean = mean + ((1 - a_prev) / (1 - a_t) * beta_t).clamp_min(1e-20).sqrt() * noise
+        return mean
+
+    def ddim_step(self, model_output: torch.Tensor, t: int, prev_t: int, x: torch.Tensor) -> torch.Tensor:
+        """DDIM's deterministic step (eta 0): x_prev = sqrt(a_prev) x0 + sqrt(1 - a_prev) eps."""
+        x0, eps = self.predict_x0_eps(model_output, t, x)
+        a_prev = self.alpha_bar(prev_t)
+        return a_prev.sqrt() * x0 + (1 - a_prev).sqrt() * eps
 
 
 def timestep_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
@@ -86,40 +146,19 @@ def sample(denoise: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], shape:
     Returns:
         The denoised sample x_0 (shape ``shape``).
     """
-    sched = make_scheduler(cfg, sampler)
+    if sampler not in ("ddpm", "ddim"):
+        raise ValueError(f"sampler must be 'ddpm' or 'ddim', not {sampler!r}")
+    sched = NoiseSchedule(cfg)
     n = steps if steps is not None else (cfg.timesteps if sampler == "ddpm" else 100)
-    sched.set_timesteps(n)
+    ts = sched.inference_timesteps(n)
+    ratio = cfg.timesteps // n
     x = torch.randn(shape, generator=generator).to(device)
-    for t in sched.timesteps:
-        tt = torch.full((shape[0],), int(t), dtype=torch.long, device=device)
+    for t in ts:
+        tt = torch.full((shape[0],), t, dtype=torch.long, device=device)
         out = denoise(x, tt)
         if sampler == "ddpm":
             noise = torch.randn(shape, generator=generator).to(device)
-            x = _ddpm_with_noise(sched, out, int(t), x, noise)
+            x = sched.ddpm_step(out, t, t - ratio, x, noise)
         else:
-            x = sched.step(out, int(t), x, eta=0.0, return_dict=True).prev_sample
+            x = sched.ddim_step(out, t, t - ratio, x)
     return x
-
-
-def _ddpm_with_noise(sched, model_output: torch.Tensor, t: int, x: torch.Tensor, noise: torch.Tensor) -> torch.Tensor:
-    """DDPM's ancestral step (the posterior mean of DDPM's eq. 7 plus its variance, diffusers'
-    "fixed_small") with a given noise draw: the scheduler's own ``step`` draws from torch's global RNG,
-    which would make samples depend on unrelated code. Uses the scheduler's alphas and timestep spacing."""
-    prev_t = sched.previous_timestep(t)
-    a_t = sched.alphas_cumprod[t]
-    if sched.config.prediction_type == "epsilon":
-        pred = (x - (1 - a_t).sqrt() * model_output) / a_t.sqrt()
-    else:
-        pred = model_output
-    if sched.config.clip_sample:
-        r = sched.config.clip_sample_range
-        pred = pred.clamp(-r, r)
-    a_prev = sched.alphas_cumprod[prev_t] if prev_t >= 0 else sched.one
-    beta_t = 1 - a_t / a_prev
-    c0 = a_prev.sqrt() * beta_t / (1 - a_t)
-    ct = (a_t / a_prev).sqrt() * (1 - a_prev) / (1 - a_t)
-    mean = c0 * pred + ct * x
-    if t > 0:
-        var = ((1 - a_prev) / (1 - a_t) * beta_t).clamp_min(1e-20)
-        mean = mean + var.sqrt() * noise
-    return mean

@@ -10,6 +10,7 @@ schedule, RNG state and step); a restarted job continues from it, and it is remo
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -22,7 +23,7 @@ from tohgs.config import settings_from
 from tohgs.data.maps import MapDataset
 from tohgs.hand.model import HandModel
 from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
-from tohgs.models.diffusion import make_scheduler
+from tohgs.models.diffusion import NoiseSchedule
 from tohgs.models.grasp_diffuser import LOSS_WEIGHTS, GraspDiffuser, GraspDiffuserConfig, grasp_losses, total_loss
 
 log = logging.getLogger(__name__)
@@ -59,6 +60,58 @@ def build_model(name: str, cfg: dict[str, Any]):
     raise ValueError(f"unknown model {name!r} (expected one of {MODELS})")
 
 
+def cosine_with_warmup(optimizer: torch.optim.Optimizer, warmup: int, total: int) -> torch.optim.lr_scheduler.LambdaLR:
+    """Learning-rate factor rising linearly from 0 over ``warmup`` steps, then half a cosine down to 0 at
+    ``total`` (the official code's schedule; diffusers' ``get_cosine_schedule_with_warmup``)."""
+
+    def factor(step: int) -> float:
+        if step < warmup:
+            return step / max(1, warmup)
+        progress = (step - warmup) / max(1, total - warmup)
+        return max(0.0, 0.5 * (1.0 + math.cos(math.pi * progress)))
+
+    return torch.optim.lr_scheduler.LambdaLR(optimizer, factor)
+
+
+class EMA:
+    """Exponential moving average of a model's parameters (diffusers' ``EMAModel`` rule): update k = 1, 2, ...
+    uses decay 0 for k = 1 and ``min(decay, k / (9 + k))`` after, so the average starts at the weights and
+    forgets the early ones quickly."""
+
+    def __init__(self, parameters, decay: float):
+        self.decay = float(decay)
+        self.step_count = 0
+        self.shadow = [p.detach().clone() for p in parameters]
+
+    def current_decay(self) -> float:
+        """The decay of the update that was made last."""
+        k = self.step_count - 1
+        return 0.0 if k <= 0 else min(self.decay, (1 + k) / (10 + k))
+
+    @torch.no_grad()
+    def step(self, parameters) -> None:
+        self.step_count += 1
+        d = self.current_decay()
+        for s, p in zip(self.shadow, parameters):
+            if p.requires_grad:
+                s.sub_((1 - d) * (s - p))
+            else:
+                s.copy_(p)
+
+    @torch.no_grad()
+    def copy_to(self, parameters) -> None:
+        """Write the averaged weights into ``parameters``."""
+        for s, p in zip(self.shadow, parameters):
+            p.copy_(s)
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"decay": self.decay, "step_count": self.step_count, "shadow": self.shadow}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.decay, self.step_count = float(state["decay"]), int(state["step_count"])
+        self.shadow = [t.clone() for t in state["shadow"]]
+
+
 def pick_device(device: str) -> torch.device:
     if device == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
@@ -76,23 +129,23 @@ def _collate(items: list[dict[str, Any]], device: torch.device, keep: np.ndarray
     return out
 
 
-def training_step(name: str, model, batch: dict[str, torch.Tensor], sched, generator: torch.Generator,
+def training_step(name: str, model, batch: dict[str, torch.Tensor], sched: NoiseSchedule, generator: torch.Generator,
                   hand: HandModel | None, weights: tuple[float, float, float, float], alpha_contact: float
                   ) -> dict[str, torch.Tensor]:
     """One step's losses (``"loss"`` is what is optimised)."""
     b = batch["points"].shape[0]
     dev = batch["points"].device
-    t = torch.randint(0, sched.config.num_train_timesteps, (b,), generator=generator).to(dev)
+    t = torch.randint(0, sched.timesteps, (b,), generator=generator).to(dev)
     if name == "contact_diffuser":
         x0 = 2 * batch["contact"] - 1
         noise = torch.randn(x0.shape, generator=generator).to(dev)
-        x_t = sched.add_noise(x0, noise, t)
+        x_t = sched.q_sample(x0, noise, t)
         cond = model.condition(batch["points"], batch["normals"], batch["d_init"], batch["d_goal"])
         loss = torch.nn.functional.mse_loss(model(x_t, t, cond), noise)
         return {"loss": loss}
     x0 = model.normalise(batch["grasp"])
     noise = torch.randn(x0.shape, generator=generator).to(dev)
-    x_t = sched.add_noise(x0, noise, t)
+    x_t = sched.q_sample(x0, noise, t)
     cond = model.condition(batch["points"], batch["normals"], batch["contact"])
     x0_hat = model(x_t, t, cond)
     terms = grasp_losses(model, hand, x0_hat, x0, batch["points"], batch["contact"], alpha_contact)
@@ -105,9 +158,6 @@ def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: 
 
     Returns the checkpoint dict.
     """
-    from diffusers.optimization import get_cosine_schedule_with_warmup
-    from diffusers.training_utils import EMAModel
-
     s = settings_from(TrainSettings, settings)
     torch.set_num_threads(max(1, s.threads))
     device = pick_device(s.device)
@@ -122,10 +172,10 @@ def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: 
             raise ValueError("GraspDiffuser trains with the hand model in the loss; pass hand=")
         hand = hand.to(device)
         model.set_normaliser(torch.as_tensor(np.concatenate([sh.grasp for sh in data.shards]), device=device))
-    sched = make_scheduler(model.diffusion, "ddpm")
+    sched = NoiseSchedule(model.diffusion)
     opt = torch.optim.AdamW(model.parameters(), lr=s.lr, betas=s.betas, weight_decay=s.weight_decay)
-    lr_sched = get_cosine_schedule_with_warmup(opt, s.warmup, s.steps)
-    ema = EMAModel(model.parameters(), decay=s.ema_decay)
+    lr_sched = cosine_with_warmup(opt, s.warmup, s.steps)
+    ema = EMA(model.parameters(), decay=s.ema_decay)
     gen = torch.Generator().manual_seed(s.seed)
     order_rng = np.random.default_rng(s.seed)
     curve: list[dict[str, float]] = []

@@ -10,12 +10,11 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-import torch  # noqa: E402
 import trimesh  # noqa: E402
 
 from tohgs.data.grasps import read_prior_grasps  # noqa: E402
 from tohgs.grasps.filter import CHECKS  # noqa: E402
-from tohgs.hand.model import HandModel  # noqa: E402
+from tohgs.hand.assets import HandAssets  # noqa: E402
 from tohgs.viz.render import draw_mesh, save_figure, set_equal  # noqa: E402
 
 log = logging.getLogger(__name__)
@@ -48,7 +47,7 @@ def _why(flags: dict[str, np.ndarray], i: int, g) -> str:
     return "rejected: " + ", ".join(reasons)
 
 
-def plot_prior_grasps(store_paths: list[str | Path], objects_dir: str | Path, hand: HandModel, out_png: str | Path,
+def plot_prior_grasps(store_paths: list[str | Path], objects_dir: str | Path, hand: HandAssets, out_png: str | Path,
                       n_objects: int = 6, n_accepted: int = 2) -> None:
     """Per object (rows): ``n_accepted`` accepted grasps from two viewpoints, then one rejected grasp.
 
@@ -59,7 +58,7 @@ def plot_prior_grasps(store_paths: list[str | Path], objects_dir: str | Path, ha
     names = pick_objects(list(stores), n_objects)
     cols = 2 * n_accepted + 1
     fig = plt.figure(figsize=(2.6 * cols, 2.7 * max(1, len(names))))
-    faces = hand.closed_faces.cpu().numpy()
+    faces = np.asarray(hand.closed_faces)
     for row, name in enumerate(names):
         g = read_prior_grasps(stores[name], filtered=True)
         mesh = trimesh.load(Path(objects_dir) / name / "mesh.obj", force="mesh", process=False)
@@ -67,9 +66,8 @@ def plot_prior_grasps(store_paths: list[str | Path], objects_dir: str | Path, ha
         acc = [i for i in order if g.passed[i]][:n_accepted]
         rej = [i for i in order if not g.passed[i]][:1]
         shown = [(i, v, "accepted") for i in acc for v in range(2)] + [(i, 0, "rejected") for i in rej]
-        with torch.no_grad():
-            idx = sorted({i for i, _, _ in shown})
-            verts = dict(zip(idx, hand(torch.as_tensor(g.pose[idx])).vertices.cpu().numpy())) if idx else {}
+        idx = sorted({i for i, _, _ in shown})
+        verts = dict(zip(idx, hand.vertices(g.pose[idx]))) if idx else {}
         for col in range(cols):
             ax = fig.add_subplot(len(names), cols, row * cols + col + 1, projection="3d")
             ax.set_axis_off()

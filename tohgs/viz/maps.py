@@ -10,16 +10,15 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-import torch  # noqa: E402
 
 from tohgs.data.maps import read_map_shard  # noqa: E402
-from tohgs.hand.model import HandModel  # noqa: E402
+from tohgs.hand.assets import HandAssets  # noqa: E402
 from tohgs.viz.render import draw_mesh, save_figure, set_equal  # noqa: E402
 
 log = logging.getLogger(__name__)
 
 
-def plot_maps(shard_paths: list[str | Path], hand: HandModel, out_png: str | Path, per_task: int = 2) -> None:
+def plot_maps(shard_paths: list[str | Path], hand: HandAssets, out_png: str | Path, per_task: int = 2) -> None:
     """``per_task`` training samples of every task (rows): D_init, D_goal and contact on the object cloud,
     and the hand with the object and the nearby scene cloud."""
     chosen = []
@@ -36,13 +35,12 @@ def plot_maps(shard_paths: list[str | Path], hand: HandModel, out_png: str | Pat
         chosen += [(task, sh, r) for r in dict.fromkeys(rows)]
     cols = ["D_init", "D_goal", "contact", "hand"]
     fig = plt.figure(figsize=(3.0 * len(cols), 3.0 * max(1, len(chosen))))
-    faces = hand.closed_faces.cpu().numpy()
+    faces = np.asarray(hand.closed_faces)
     for i, (task, sh, g) in enumerate(chosen):
         c = int(sh.grasp_config[g])
         pts = sh.points[c]
         name = sh.attrs["objects"][int(sh.object_id[c])]
-        with torch.no_grad():
-            hv = hand(torch.as_tensor(sh.grasp[g : g + 1])).vertices.cpu().numpy()[0]
+        hv = hand.vertices(sh.grasp[g : g + 1])[0]
         values = {"D_init": sh.d_init[c], "D_goal": sh.d_goal[c], "contact": sh.contact[g]}
         for j, col in enumerate(cols):
             ax = fig.add_subplot(len(chosen), len(cols), i * len(cols) + j + 1, projection="3d")

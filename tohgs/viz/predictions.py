@@ -11,13 +11,12 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-import torch  # noqa: E402
 
 from tohgs.assets.supports import read_supports  # noqa: E402
 from tohgs.data.maps import read_map_shard  # noqa: E402
 from tohgs.data.predictions import read_predictions  # noqa: E402
 from tohgs.data.scenes import read_scenes  # noqa: E402
-from tohgs.hand.model import HandModel  # noqa: E402
+from tohgs.hand.assets import HandAssets  # noqa: E402
 from tohgs.sim.scenes import load_configuration  # noqa: E402
 from tohgs.sim.world import World  # noqa: E402
 from tohgs.viz.render import save_figure, set_equal  # noqa: E402
@@ -63,7 +62,7 @@ def _add_hand(world: World, vertices: np.ndarray, faces: np.ndarray) -> int:
 
 
 def plot_predictions(prediction_store: str | Path, scene_stores: list[str | Path], objects_dir: str | Path,
-                     supports_json: str | Path, hand: HandModel, out_png: str | Path, max_configs: int = 4,
+                     supports_json: str | Path, hand: HandAssets, out_png: str | Path, max_configs: int = 4,
                      size: tuple[int, int] = (360, 270)) -> None:
     """Test configurations (rows) with the method's first predicted hand at the initial pose (left) and
     carried to the goal pose (right); target red, obstacles blue, base green, hand skin-coloured."""
@@ -73,7 +72,7 @@ def plot_predictions(prediction_store: str | Path, scene_stores: list[str | Path
     rows = pick_configs(arrays["object_id"], max_configs)
     if not rows:
         raise ValueError(f"{prediction_store}: no predicted configuration to draw")
-    faces = hand.closed_faces.cpu().numpy()
+    faces = np.asarray(hand.closed_faces)
     fig, axes = plt.subplots(len(rows), 2, figsize=(7.2, 2.75 * len(rows)), squeeze=False)
     with World() as world:
         for r, i in enumerate(rows):
@@ -83,9 +82,7 @@ def plot_predictions(prediction_store: str | Path, scene_stores: list[str | Path
                 target = sc.target_init_pose[c, :3] if which == "init" else sc.target_goal_pose[c, :3]
                 eye, look = close_camera(target, attrs["task"])
                 load_configuration(world, sc, c, objects_dir, supports, which=which, static=True, colors=COLORS)
-                with torch.no_grad():
-                    g = torch.as_tensor(arrays[f"grasp_{which}"][i, :1], dtype=hand.rest_vertices.dtype)
-                    verts = hand(g).vertices[0].cpu().numpy()
+                verts = hand.vertices(arrays[f"grasp_{which}"][i, :1])[0]
                 _add_hand(world, verts, faces)
                 axes[r, col].imshow(world.render(eye, look, *size))
                 axes[r, col].set_axis_off()

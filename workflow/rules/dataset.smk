@@ -9,7 +9,7 @@ rule task_grasps:
         objects=object_dirs(),
         supports="results/objects/supports",
         hand="results/hand/hand.npz",
-        code=code("grasps/expand", "geometry/sdf", "data/task_grasps", "data/store", "data/scenes", "data/grasps"),
+        code=code("grasps/expand", "geometry/raycast", "data/task_grasps", "data/store", "data/scenes", "data/grasps"),
     output:
         directory("results/grasps/task/{task}/{object}.zarr"),
     params:

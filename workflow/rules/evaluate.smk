@@ -27,12 +27,13 @@ rule evaluate:
         supports="results/objects/supports",
         hand="results/hand/hand.npz",
         code=code("metrics/evaluate", "metrics/quality", "data/predictions", "data/scenes", "grasps/expand",
-                  "geometry/sdf", "config"),
+                  "geometry/raycast", "config"),
     output:
         "results/metrics/{task}/{method}.parquet",
     params:
         sd=setting("metrics", "sd"),
         voxel_pitch=setting("metrics", "voxel_pitch"),
+        cache_dir=setting("cache_dir"),
     threads: config["evaluation"]["threads"]
     conda:
         "../envs/tohgs.yaml"

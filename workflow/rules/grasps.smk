@@ -6,7 +6,8 @@ rule prior_synthesis:
     input:
         object="results/objects/{object}",
         hand="results/hand/hand.npz",
-        code=code("grasps/synthesis", "grasps/filter", "grasps/prior", "geometry/sdf", "metrics/quality", "data/grasps", "config"),
+        code=code("grasps/synthesis", "grasps/filter", "grasps/prior", "geometry/sdf", "geometry/raycast",
+                  "metrics/quality", "data/grasps", "config"),
     output:
         directory("results/grasps/prior/raw/{object}.zarr"),
     params:

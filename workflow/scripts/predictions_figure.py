@@ -5,9 +5,9 @@ from tohgs.io import setup_logging
 
 setup_logging(snakemake.log[0])
 
-from tohgs.hand import HandAssets, HandModel  # noqa: E402
+from tohgs.hand import HandAssets  # noqa: E402
 from tohgs.viz.predictions import plot_predictions  # noqa: E402
 
 inp = snakemake.input
 plot_predictions(inp.predictions, inp.scenes, Path(inp.supports).parent, f"{inp.supports}/supports.json",
-                 HandModel(HandAssets.load(inp.hand)), snakemake.output[0], snakemake.params.configs)
+                 HandAssets.load(inp.hand), snakemake.output[0], snakemake.params.configs)

@@ -5,8 +5,8 @@ setup_logging(snakemake.log[0])
 
 from pathlib import Path  # noqa: E402
 
-from tohgs.hand import HandAssets, HandModel  # noqa: E402
+from tohgs.hand import HandAssets  # noqa: E402
 from tohgs.viz.grasps import plot_prior_grasps  # noqa: E402
 
-plot_prior_grasps(snakemake.input.stores, Path(snakemake.input.catalog).parent, HandModel(HandAssets.load(snakemake.input.hand)),
+plot_prior_grasps(snakemake.input.stores, Path(snakemake.input.catalog).parent, HandAssets.load(snakemake.input.hand),
                   snakemake.output[0], snakemake.params.n_objects)

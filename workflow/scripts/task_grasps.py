@@ -6,8 +6,8 @@ from tohgs.io import setup_logging
 setup_logging(snakemake.log[0])
 
 from tohgs.grasps.expand import make_task_grasps  # noqa: E402
-from tohgs.hand import HandAssets, HandModel  # noqa: E402
+from tohgs.hand import HandAssets  # noqa: E402
 
 inp = snakemake.input
 make_task_grasps(inp.scenes, inp.prior, Path(inp.supports).parent, f"{inp.supports}/supports.json",
-                 HandModel(HandAssets.load(inp.hand)), snakemake.params.settings, snakemake.output[0])
+                 HandAssets.load(inp.hand), snakemake.params.settings, snakemake.output[0])
