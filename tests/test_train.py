@@ -69,6 +69,16 @@ def test_an_interrupted_run_resumes_to_the_same_weights(trained, monkeypatch):
         torch.testing.assert_close(resumed["state_dict"][k], v, msg=k)
 
 
+def test_a_resume_file_of_an_older_format_is_refused_by_name(trained):
+    tmp, hand, out, _ = trained
+    target = out / "old.pt"
+    torch.save({"model": {}, "ema": {"decay": 0.99, "optimization_step": 3, "shadow_params": []}},
+               target.with_name("old.pt.resume"))
+    with pytest.raises(ValueError, match=r"old\.pt\.resume.*older tohgs"):
+        train_model("contact_diffuser", "placing", [tmp / "shard-0.zarr"], TINY["contact_diffuser"], SETTINGS, target,
+                    hand=hand)
+
+
 def test_predictions_are_reproducible_and_carried_to_the_goal(trained):
     tmp, hand, out, paths = trained
     settings = {"samples": 3, "sampler": "ddim", "steps": 4, "seed": 1, "device": "cpu"}

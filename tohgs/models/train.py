@@ -183,6 +183,9 @@ def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: 
     resume = Path(str(out) + ".resume")
     if resume.is_file():
         state = torch.load(resume, map_location=device, weights_only=False)
+        if "step_count" not in state.get("ema", {}):
+            raise ValueError(f"{resume}: a resume file of an older tohgs (diffusers' EMA state); delete it to "
+                             "train from the start")
         model.load_state_dict(state["model"])
         ema.load_state_dict(state["ema"])
         opt.load_state_dict(state["opt"])
