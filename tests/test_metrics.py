@@ -33,7 +33,7 @@ def test_surface_voxels_cover_the_surface_only(cube):
     assert np.abs(vox).max(1).min() > 0.018
 
 
-def test_surface_voxels_cache_returns_the_same_voxels_and_heals(cube, tmp_path):
+def test_surface_voxels_cache_returns_the_same_voxels_and_heals(cube, tmp_path, caplog):
     mesh, _, vox = cube
     first = surface_voxels(mesh, cache_dir=tmp_path)
     (entry,) = (tmp_path / "voxels").glob("*.npy")
@@ -44,6 +44,7 @@ def test_surface_voxels_cache_returns_the_same_voxels_and_heals(cube, tmp_path):
     assert len(list((tmp_path / "voxels").glob("*.npy"))) == 2
     entry.write_bytes(b"damaged")
     np.testing.assert_array_equal(surface_voxels(mesh, cache_dir=tmp_path), vox)
+    assert entry.name in caplog.text  # the damaged entry is reported, not silently replaced
     np.testing.assert_array_equal(np.load(entry), vox)  # replaced
 
 

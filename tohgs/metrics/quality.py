@@ -19,6 +19,7 @@
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,6 +27,9 @@ import numpy as np
 import trimesh
 
 from tohgs.geometry.raycast import exact_signed_distance, occupancy
+from tohgs.io import atomic_path, content_key
+
+log = logging.getLogger(__name__)
 
 VOXEL_PITCH = 0.001  # m
 
@@ -34,9 +38,7 @@ def surface_voxels(mesh: trimesh.Trimesh, pitch: float = VOXEL_PITCH, cache_dir:
     """(N, 3) centres of the surface voxels of ``mesh`` at ``pitch`` (metres, the mesh's frame), as trimesh's
     ``voxelized`` returns them. That takes seconds per object, so with ``cache_dir`` they are kept under
     ``<cache_dir>/voxels/<key>.npy`` (keyed by the mesh's vertices and faces and the pitch): the prior-grasp
-    and evaluation jobs of an object share them."""
-    from tohgs.io import atomic_path, content_key
-
+    and evaluation jobs of an object share them; an unreadable entry is recomputed and replaced."""
     path = None
     if cache_dir is not None:
         key = content_key(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64), float(pitch))
@@ -44,8 +46,8 @@ def surface_voxels(mesh: trimesh.Trimesh, pitch: float = VOXEL_PITCH, cache_dir:
         if path.is_file():
             try:
                 return np.load(path, allow_pickle=False)
-            except (OSError, ValueError):
-                pass  # a damaged entry is recomputed and replaced
+            except (OSError, ValueError) as exc:
+                log.warning("ignoring unreadable cache entry %s (%s)", path, exc)
     voxels = np.asarray(mesh.voxelized(pitch).points, dtype=np.float64)
     if path is not None:
         with atomic_path(path) as tmp, open(tmp, "wb") as fh:
