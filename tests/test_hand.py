@@ -166,10 +166,15 @@ def test_same_inputs_same_outputs(hand):
 
 
 def test_shared_shape_fast_path_equals_the_general_path(hand):
-    pose = _random_pose(6, 9)
+    pose = _random_pose(6, 9).requires_grad_(True)
     a = hand(pose, None)
     b = hand(pose, torch.zeros(6, 10, dtype=torch.float64))
     torch.testing.assert_close(a.vertices, b.vertices, atol=1e-12, rtol=0)
+    torch.testing.assert_close(a.joints, b.joints, atol=1e-12, rtol=0)
+    weights = torch.randn(6, hand.n_vertices, 3, dtype=torch.float64, generator=torch.Generator().manual_seed(2))
+    ga, gb = (torch.autograd.grad((o.vertices * weights).sum() + o.joints.sum(), pose)[0] for o in (a, b))
+    torch.testing.assert_close(ga, gb, atol=1e-10, rtol=1e-10)
+    assert a.vertices.transpose(1, 2).is_contiguous()  # coordinate-major: the optimiser's per-axis work streams
 
 
 @pytest.mark.parametrize("which", ["hand", "mano_hand"])

@@ -65,22 +65,28 @@ def test_lower_bound_bounds_the_interpolated_distance(arch):
     exact = grid(pts)
     bound = grid.lower_bound(pts)
     assert (bound <= exact + 1e-6).all()
+    torch.testing.assert_close(grid.lower_bound(pts.reshape(40, 100, 3)), bound.reshape(40, 100))  # any batch shape
     in_grid = ((pts >= grid.origin) & (pts <= grid.upper)).all(-1)
     assert in_grid.sum() > 1000 and (~in_grid).sum() > 1000
     assert (exact - bound)[in_grid].max() < 2 * 3**0.5 * grid.spacing  # a tight bound inside the grid
 
 
-def test_penetration_equals_the_dense_sum_and_its_gradient(arch):
+@pytest.mark.parametrize("layout", ["points-major", "coordinate-major"])
+def test_penetration_equals_the_dense_sum_and_its_gradient(arch, layout):
     mesh, grid = arch
     rng = np.random.default_rng(4)
     centre = mesh.bounds.mean(0)
     pts = torch.as_tensor(centre + rng.normal(0, 0.03, (6, 500, 3)), dtype=torch.float32)
+    pts[:, :20] += 0.1  # some beyond the grid
     a = pts.clone().requires_grad_(True)
     dense = torch.relu(-grid(a)).sum(-1)
     (ga,) = torch.autograd.grad(dense.sum(), a)
-    b = pts.clone().requires_grad_(True)
-    sparse = grid.penetration(b)
+    b = pts.clone() if layout == "points-major" else pts.transpose(1, 2).contiguous()  # (6, 3, 500)
+    b.requires_grad_(True)
+    view = b if layout == "points-major" else b.transpose(1, 2)  # (6, 500, 3) either way
+    sparse = grid.penetration(view)
     (gb,) = torch.autograd.grad(sparse.sum(), b)
     assert (dense > 0).all()  # the clouds do sink in
     torch.testing.assert_close(sparse, dense)
-    torch.testing.assert_close(gb, ga)
+    torch.testing.assert_close(gb if layout == "points-major" else gb.transpose(1, 2), ga)
+    assert gb.is_contiguous()  # the gradient is built in the points' own layout

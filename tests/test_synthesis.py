@@ -84,3 +84,62 @@ def test_support_planes_touch_the_object_and_the_plane_energy_pushes_hands_out(s
         below[:, 2] += floor - 0.02 - lowest
         assert (energy(above, contact).plane == 0).all()
         assert (energy(below, contact).plane > 0).all()
+
+
+def test_energy_terms_equal_their_dense_definitions(setup):
+    """The fast paths (coordinate-major vertices, sparse penetration, plane rows, one SDF lookup for the
+    contacts and their normals, a matmul for the keypoint pairs) against the terms written out densely."""
+    hand, cube, sdf = setup
+    s = SynthesisSettings(batch=12, plane_fraction=0.5)
+    g = torch.Generator().manual_seed(3)
+    planes = support_planes(cube.vertices, s, g)
+    pose, contact = initial_grasps(hand, cube.vertices, s, g, planes)
+    centre = torch.as_tensor(cube.vertices.mean(0), dtype=pose.dtype)
+    pose[:, :3] += 0.6 * (centre - hand(pose).vertices.detach().mean(1))  # sink half of each hand in
+    pose = pose.requires_grad_(True)
+    e = GraspEnergy(hand, sdf, s, planes)(pose, contact)
+    v = hand(pose).vertices.contiguous()
+    x = v[torch.arange(12)[:, None], hand.contact_ids[contact]]
+    ref_pen = torch.relu(-sdf(v)).sum(-1)
+    ref_dis = sdf(x).abs().sum(-1)
+    n, offset = planes[:, None, :3], planes[:, 3:4]
+    ref_plane = (torch.relu(offset - (v * n).sum(-1)) * (n.norm(dim=-1) > 0)).sum(-1)
+    kp = hand(pose).joints[:, GraspEnergy(hand, sdf, s).kp_idx]
+    pairs = GraspEnergy(hand, sdf, s).pairs
+    ref_spen = torch.relu(s.spen_threshold - (kp[:, pairs[:, 0]] - kp[:, pairs[:, 1]]).norm(dim=-1)).sum(-1)
+    assert (ref_pen > 0).sum() >= 6 and (ref_plane > 0).any()  # the terms are exercised
+    for got, ref in ((e.pen, ref_pen), (e.dis, ref_dis), (e.plane, ref_plane), (e.spen, ref_spen)):
+        torch.testing.assert_close(got, ref, rtol=1e-5, atol=1e-7)
+        g_got, g_ref = (torch.autograd.grad(t.sum(), pose, retain_graph=True)[0] for t in (got, ref))
+        torch.testing.assert_close(g_got, g_ref, rtol=1e-4, atol=1e-5)
+
+
+def test_refinement_adam_matches_torch_optim(setup):
+    """The written-out Adam and cosine schedule of the polishing phase follow torch.optim's."""
+    from tohgs.grasps.synthesis import _refine
+
+    hand, cube, sdf = setup
+    s = SynthesisSettings(batch=6, refine_iterations=7, refine_lr=0.002)
+    pose, contact = initial_grasps(hand, cube.vertices, s, torch.Generator().manual_seed(5))
+    energy = GraspEnergy(hand, sdf, s)
+    with torch.no_grad():
+        e0 = energy(pose, contact)
+    history: list[float] = []
+    best_pose, best = _refine(energy, pose, contact, e0, s, history, progress=False)
+    # The reference: torch.optim.Adam and CosineAnnealingLR, keeping each grasp's best pose.
+    x = pose.clone().requires_grad_(True)
+    opt = torch.optim.Adam([x], lr=s.refine_lr)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, s.refine_iterations)
+    ref_pose, ref_total = pose.clone(), e0.total.clone()
+    for _ in range(s.refine_iterations):
+        cur = energy(x, contact)
+        better = cur.total.detach() < ref_total
+        ref_pose = torch.where(better[:, None], x.detach(), ref_pose)
+        ref_total = torch.where(better, cur.total.detach(), ref_total)
+        opt.zero_grad()
+        cur.total.sum().backward()
+        opt.step()
+        sched.step()
+    torch.testing.assert_close(best_pose, ref_pose, rtol=0, atol=1e-6)
+    torch.testing.assert_close(best.total, ref_total, rtol=1e-5, atol=1e-6)
+    assert len(history) == s.refine_iterations and best.total.mean() < e0.total.mean()

@@ -72,15 +72,16 @@ class SDFGrid:
         The value at the nearest grid point (of the clamped point, beyond the grid) minus
         ``sqrt(3) * spacing``: the interpolated value is a convex combination of the 8 surrounding grid
         values, each within ``sqrt(3) * spacing`` of the nearest one for a 1-Lipschitz distance field, and
-        beyond the grid :meth:`__call__` only adds a positive distance. One gather instead of a trilinear interpolation, so a caller can
-        skip the points that cannot be inside (the penetration energy's only non-zero terms)."""
-        shape = points.shape[:-1]
+        beyond the grid :meth:`__call__` only adds a positive distance. One gather instead of a trilinear
+        interpolation, so a caller can skip the points that cannot be inside (the penetration energy's
+        only non-zero terms). Computed one axis at a time, so points held coordinate-major stream."""
         nz, ny, nx = self.values.shape
-        top = torch.tensor([nx - 1, ny - 1, nz - 1], dtype=self.values.dtype, device=points.device)
-        idx = ((points.reshape(-1, 3).to(self.values.dtype) - self.origin) / self.spacing).round_()
-        idx = torch.minimum(idx.clamp_(min=0), top).long()  # beyond the grid: its border (lower still)
-        flat = (idx[:, 2] * ny + idx[:, 1]) * nx + idx[:, 0]
-        return (self.values.reshape(-1)[flat] - 3**0.5 * self.spacing).reshape(shape)
+        # Grid indices as whole floats; float32 holds every flat index exactly up to 2**24 grid points.
+        dtype = self.values.dtype if self.values.numel() <= 2**24 else torch.float64
+        ix, iy, iz = (((a.to(dtype) - o) / self.spacing).round_().clamp_(0, n - 1)
+                      for a, o, n in zip(points.unbind(-1), self.origin.tolist(), (nx, ny, nz)))
+        flat = iz.mul_(ny).add_(iy).mul_(nx).add_(ix).long()  # beyond the grid: its border (lower still)
+        return self.values.reshape(-1).take(flat) - 3**0.5 * self.spacing
 
     def penetration(self, points: torch.Tensor) -> torch.Tensor:
         """``sum relu(-d)`` over the last-but-one axis of (B, N, 3) points -> (B,) metres, differentiable.
@@ -88,9 +89,11 @@ class SDFGrid:
         Equal to ``relu(-self(points)).sum(-1)`` (value and gradient), but only the points whose
         :meth:`lower_bound` is negative are interpolated: a hand near an object has few such points."""
         b = points.shape[0]
-        candidate = self.lower_bound(points) < 0
-        bi, ni = candidate.nonzero(as_tuple=True)
-        depth = torch.relu(-self(points[bi, ni]))
+        bi, ni = (self.lower_bound(points) < 0).nonzero(as_tuple=True)
+        pt = points.transpose(1, 2)
+        # The (M, 3) candidates, indexed in the layout the points live in (so is the gradient built).
+        selected = pt[bi, :, ni] if pt.is_contiguous() else points[bi, ni]
+        depth = torch.relu(-self(selected))
         return torch.zeros(b, dtype=depth.dtype, device=points.device).index_add(0, bi, depth)
 
     def save(self, path) -> None:

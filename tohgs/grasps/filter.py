@@ -109,3 +109,34 @@ def filter_prior_grasps(raw: str | Path, thresholds: dict[str, Any], out: str | 
     g.attrs = {**g.attrs, "thresholds": asdict(t), "rejections": counts}
     write_prior_grasps(g, out)
     return g
+
+
+def summarize_prior_grasps(store_paths: list[str | Path], out_csv: str | Path, min_accepted: int = 16):
+    """One row per object: grasps, accepted, failures per check and timing; writes ``out_csv``.
+
+    Logs the totals, the acceptance rate per check and the share of objects with at least
+    ``min_accepted`` accepted grasps. Returns the table (a ``pandas.DataFrame``).
+    """
+    import pandas as pd
+
+    from tohgs.data.grasps import read_prior_grasps
+    from tohgs.io import atomic_path
+
+    rows = []
+    for p in store_paths:
+        g = read_prior_grasps(p, filtered=True)
+        timing = g.attrs.get("timing", {})
+        rows.append({"object": g.object, "grasps": len(g), "accepted": int(g.passed.sum()),
+                     **{f"fail_{c}": int((~g.flags[c]).sum()) for c in CHECKS},
+                     **{f"seconds_{k}": round(float(v), 2) for k, v in timing.items()}})
+    df = pd.DataFrame(rows)
+    with atomic_path(out_csv) as tmp:
+        df.to_csv(tmp, index=False)
+    if len(df):
+        n = int(df.grasps.sum())
+        log.info("%d objects, %d grasps, %d accepted (%.1f %%); objects with >= %d accepted: %d (%.0f %%)",
+                 len(df), n, int(df.accepted.sum()), 100 * df.accepted.sum() / n, min_accepted,
+                 int((df.accepted >= min_accepted).sum()), 100 * (df.accepted >= min_accepted).mean())
+        for c in CHECKS:
+            log.info("check %-8s passes %.1f %% of grasps", c, 100 * (1 - df[f"fail_{c}"].sum() / n))
+    return df

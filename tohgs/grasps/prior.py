@@ -7,6 +7,8 @@ Two steps, two workflow rules, so that a threshold change reruns only the cheap 
    (:mod:`tohgs.metrics.quality`) -> the raw store.
 2. :func:`~tohgs.grasps.filter.filter_prior_grasps`: the filter's flags -> the filtered store (numpy only:
    the joint limits travel in the raw store, so the filter job imports no torch).
+
+The stage's summary, :func:`~tohgs.grasps.filter.summarize_prior_grasps`, is torch-free too.
 """
 
 from __future__ import annotations
@@ -23,12 +25,13 @@ import torch
 import trimesh
 
 from tohgs.config import settings_from
-from tohgs.data.grasps import ENERGY_TERMS, PriorGrasps, read_prior_grasps, write_prior_grasps
+from tohgs.data.grasps import ENERGY_TERMS, PriorGrasps, write_prior_grasps
 from tohgs.geometry.sdf import SDFGrid
-from tohgs.grasps.filter import filter_prior_grasps  # noqa: F401  (re-exported: the stage's second step)
+from tohgs.grasps.filter import filter_prior_grasps, summarize_prior_grasps  # noqa: F401  (re-exported: the stage's other steps)
 from tohgs.grasps.synthesis import SynthesisSettings, synthesize
 from tohgs.hand.model import HandModel
 from tohgs.io import content_key
+from tohgs.runtime import keep_freed_memory
 from tohgs.metrics.quality import (DisplacementSimulator, SDSettings, contact_distance, sd_gravity,
                                    penetration_volume, surface_voxels)
 
@@ -107,6 +110,7 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
         threads: torch threads.
     """
     torch.set_num_threads(max(1, int(threads)))
+    keep_freed_memory()  # the optimiser's megabyte tensors would otherwise page-fault in every step
     object_dir = Path(object_dir)
     name = object_dir.name
     mesh_path = object_dir / "mesh.obj"
@@ -143,34 +147,3 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
                "config": {"synthesis": asdict(s_syn), "sdf": asdict(s_sdf), "sd": asdict(s_sd), "voxel_pitch": voxel_pitch}})
     write_prior_grasps(grasps, out)
     return grasps
-
-
-def summarize_prior_grasps(store_paths: list[str | Path], out_csv: str | Path, min_accepted: int = 16):
-    """One row per object: grasps, accepted, failures per check and timing; writes ``out_csv``.
-
-    Logs the totals, the acceptance rate per check and the share of objects with at least
-    ``min_accepted`` accepted grasps. Returns the table (a ``pandas.DataFrame``).
-    """
-    import pandas as pd
-
-    from tohgs.grasps.filter import CHECKS
-    from tohgs.io import atomic_path
-
-    rows = []
-    for p in store_paths:
-        g = read_prior_grasps(p, filtered=True)
-        timing = g.attrs.get("timing", {})
-        rows.append({"object": g.object, "grasps": len(g), "accepted": int(g.passed.sum()),
-                     **{f"fail_{c}": int((~g.flags[c]).sum()) for c in CHECKS},
-                     **{f"seconds_{k}": round(float(v), 2) for k, v in timing.items()}})
-    df = pd.DataFrame(rows)
-    with atomic_path(out_csv) as tmp:
-        df.to_csv(tmp, index=False)
-    if len(df):
-        n = int(df.grasps.sum())
-        log.info("%d objects, %d grasps, %d accepted (%.1f %%); objects with >= %d accepted: %d (%.0f %%)",
-                 len(df), n, int(df.accepted.sum()), 100 * df.accepted.sum() / n, min_accepted,
-                 int((df.accepted >= min_accepted).sum()), 100 * (df.accepted >= min_accepted).mean())
-        for c in CHECKS:
-            log.info("check %-8s passes %.1f %% of grasps", c, 100 * (1 - df[f"fail_{c}"].sum() / n))
-    return df

@@ -39,7 +39,7 @@ import numpy as np
 import torch
 
 from tohgs.geometry.sdf import SDFGrid
-from tohgs.hand.layout import FINGERS
+from tohgs.hand.layout import FINGERS, KEYPOINT_NAMES
 from tohgs.hand.model import HandModel
 from tohgs.hand.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 
@@ -123,8 +123,6 @@ def wrench_energy(x: torch.Tensor, normal: torch.Tensor) -> torch.Tensor:
 
 def _distal_keypoints() -> list[tuple[int, str]]:
     """(keypoint index in the 21, finger) for the last two joints and the tip of every finger."""
-    from tohgs.hand.layout import KEYPOINT_NAMES
-
     out = []
     for finger, ks in FINGERS.items():
         out += [(ks[1], finger), (ks[2], finger), (KEYPOINT_NAMES.index(f"{finger}_tip"), finger)]
@@ -140,19 +138,29 @@ class GraspEnergy:
         a row with a zero normal means no plane for that grasp."""
         self.hand, self.sdf, self.s = hand, sdf, settings
         self.planes = planes
+        # The grasps that have a plane (a zero normal means none): only their vertices are tested.
+        self.plane_rows = None if planes is None else (planes[:, :3].norm(dim=-1) > 0).nonzero()[:, 0]
         kp = _distal_keypoints()
         self.kp_idx = torch.tensor([k for k, _ in kp])
         fingers = [f for _, f in kp]
         pairs = [(i, j) for i in range(len(kp)) for j in range(i + 1, len(kp)) if fingers[i] != fingers[j]]
         self.pairs = torch.tensor(pairs)
+        # (P, 21): row p is +1 at the pair's first keypoint and -1 at its second, so that
+        # pair_diff @ joints is every pair's difference in one matmul (gathers backpropagate slowly).
+        self.pair_diff = torch.zeros(len(pairs), len(KEYPOINT_NAMES), dtype=hand.rest_joints.dtype,
+                                     device=hand.rest_joints.device)
+        rows = torch.arange(len(pairs))
+        self.pair_diff[rows, self.kp_idx[self.pairs[:, 0]]] = 1.0
+        self.pair_diff[rows, self.kp_idx[self.pairs[:, 1]]] = -1.0
 
-    def normals(self, x: torch.Tensor) -> torch.Tensor:
-        """Outward unit normals of the SDF at (B, n, 3) points by central differences (differentiable in x)."""
+    def distance_and_normals(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The SDF at (B, n, 3) points -> (B, n) metres, and its outward unit normals there -> (B, n, 3), by
+        central differences (differentiable in x); one grid lookup for the points and their 6 neighbours."""
         h = self.sdf.spacing
-        offsets = h * torch.eye(3, dtype=x.dtype, device=x.device)
-        d = self.sdf(torch.stack([x[..., None, :] + offsets, x[..., None, :] - offsets], -3))  # (B, n, 2, 3)
-        grad = (d[..., 0, :] - d[..., 1, :]) / (2 * h)
-        return grad / grad.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+        offsets = h * torch.cat([torch.zeros(1, 3), torch.eye(3), -torch.eye(3)]).to(x)  # (7, 3)
+        d = self.sdf(x[..., None, :] + offsets)  # (B, n, 7)
+        grad = (d[..., 1:4] - d[..., 4:7]) / (2 * h)
+        return d[..., 0], grad / grad.norm(dim=-1, keepdim=True).clamp_min(1e-9)
 
     def __call__(self, pose: torch.Tensor, contact_idx: torch.Tensor) -> Energies:
         """Energies of (B, 51) poses with (B, n) contact indices."""
@@ -160,25 +168,26 @@ class GraspEnergy:
         out = hand(pose)
         verts, joints = out.vertices, out.joints
         b = pose.shape[0]
+        verts_t = verts.transpose(1, 2)  # (B, 3, V): contiguous from the hand model's fast path
         cid = hand.contact_ids[contact_idx]  # (B, n) vertex ids
-        x = torch.gather(verts, 1, cid[..., None].expand(-1, -1, 3))  # (B, n, 3)
-        normal = self.normals(x)
+        x = torch.gather(verts_t, 2, cid[:, None, :].expand(-1, 3, -1)).transpose(1, 2)  # (B, n, 3)
+        dist_x, normal = self.distance_and_normals(x)
         e_fc = wrench_energy(x, normal)
-        e_dis = self.sdf(x).abs().sum(-1)
+        e_dis = dist_x.abs().sum(-1)
         e_pen = self.sdf.penetration(verts)
         fingers = pose[:, 6:]
         e_prior = (((fingers - hand.prior_mean) / hand.prior_std) ** 2).mean(-1)
-        kp = joints[:, self.kp_idx]
-        dist = (kp[:, self.pairs[:, 0]] - kp[:, self.pairs[:, 1]]).norm(dim=-1)
+        dist = (self.pair_diff @ joints).norm(dim=-1)  # (B, P) distances of the keypoint pairs
         e_spen = torch.relu(s.spen_threshold - dist).sum(-1)
         lim = hand.joint_limits.reshape(45, 2)
         e_joint = (torch.relu(fingers - lim[:, 1]) + torch.relu(lim[:, 0] - fingers)).sum(-1)
-        if self.planes is not None:
-            n, offset = self.planes[:, None, :3].to(verts.dtype), self.planes[:, 3:4].to(verts.dtype)
-            has = (n.norm(dim=-1) > 0).to(verts.dtype)  # (B, 1)
-            e_plane = (torch.relu(offset - (verts * n).sum(-1)) * has).sum(-1)
-        else:
-            e_plane = torch.zeros(b, dtype=verts.dtype)
+        e_plane = torch.zeros(b, dtype=verts.dtype, device=verts.device)
+        if self.plane_rows is not None and len(self.plane_rows):
+            rows = self.plane_rows
+            n, offset = self.planes[rows, :3].to(verts.dtype), self.planes[rows, 3:4].to(verts.dtype)
+            vx, vy, vz = verts_t[rows].unbind(1)  # (R, V) each
+            height = vx * n[:, 0:1] + vy * n[:, 1:2] + vz * n[:, 2:3]  # n . v
+            e_plane = e_plane.index_add(0, rows, torch.relu(offset - height).sum(-1))
         total = (e_fc + s.w_dis * e_dis + s.w_pen * e_pen + s.w_prior * e_prior + s.w_spen * e_spen
                  + s.w_joint * e_joint + s.w_plane * e_plane)
         return Energies(total, e_fc, e_dis, e_pen, e_prior, e_spen, e_joint, e_plane)
@@ -301,27 +310,32 @@ def synthesize(hand: HandModel, sdf: SDFGrid, vertices: np.ndarray, settings: Sy
 
 def _refine(energy: GraspEnergy, pose: torch.Tensor, contact: torch.Tensor, e: Energies, s: SynthesisSettings,
             history: list[float], progress: bool) -> tuple[torch.Tensor, Energies]:
-    """Polish the annealed grasps with their contacts fixed: Adam on the same energy, the learning rate
-    decaying to zero on a cosine; every grasp keeps the lowest-energy pose it visited."""
+    """Polish the annealed grasps with their contacts fixed: Adam on the same energy (betas 0.9, 0.999,
+    eps 1e-8), the learning rate decaying to zero on a cosine; every grasp keeps the lowest-energy pose it
+    visited. Adam is written out: creating a ``torch.optim`` optimiser imports ``torch._dynamo``, seconds
+    per job."""
     best_pose, best = pose.clone(), e
     x = pose.clone().requires_grad_(True)
-    opt = torch.optim.Adam([x], lr=s.refine_lr)
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, s.refine_iterations)
+    m, v = torch.zeros_like(x), torch.zeros_like(x)
+    beta1, beta2, eps = 0.9, 0.999, 1e-8
     steps = range(s.refine_iterations)
     if progress:
         from tqdm import tqdm
 
         steps = tqdm(steps, desc="refine", mininterval=5.0)
-    for _ in steps:
+    for t in steps:
         cur = energy(x, contact)
         with torch.no_grad():
             better = cur.total < best.total
             best_pose = torch.where(better[:, None], x.detach(), best_pose)
             best = Energies(**{k: torch.where(better, getattr(cur, k), getattr(best, k)).detach()
                                for k in best.__dict__})
-        opt.zero_grad()
-        cur.total.sum().backward()
-        opt.step()
-        sched.step()
+        (grad,) = torch.autograd.grad(cur.total.sum(), x)
+        with torch.no_grad():
+            lr = s.refine_lr * 0.5 * (1 + math.cos(math.pi * t / s.refine_iterations))
+            m.lerp_(grad, 1 - beta1)
+            v.mul_(beta2).addcmul_(grad, grad, value=1 - beta2)
+            denom = (v.sqrt() / math.sqrt(1 - beta2 ** (t + 1))).add_(eps)
+            x.addcdiv_(m, denom, value=-lr / (1 - beta1 ** (t + 1)))
         history.append(float(best.total.mean()))
     return best_pose, best

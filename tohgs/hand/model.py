@@ -26,12 +26,27 @@ from tohgs.hand.rotations import axis_angle_to_matrix
 __all__ = ["HandAssets", "HandModel", "HandOutput"]
 
 
+def _chain() -> list[tuple[list[int], list[int] | None]]:
+    """Per level below the wrist: its joints, and the positions of their parents in the previous level
+    (None where the parents are that level, in order)."""
+    out = []
+    for prev, level in zip(_LEVELS[:-1], _LEVELS[1:]):
+        pidx = [prev.index(PARENTS[k]) for k in level]
+        out.append((list(level), None if pidx == list(range(len(prev))) else pidx))
+    return out
+
+
+_CHAIN = _chain()
+_LEVEL_ORDER_INV = np.argsort(np.concatenate(_LEVELS)).tolist()  # level order -> joint order
+
+
 @dataclass
 class HandOutput:
     """Result of :meth:`HandModel.forward`.
 
     Attributes:
-        vertices: (B, V, 3) metres.
+        vertices: (B, V, 3) metres. Without betas and pose blend shapes, a transposed view of a contiguous
+            (B, 3, V) tensor: ``vertices.transpose(1, 2)`` is free, and per-coordinate work streams.
         joints: (B, 21, 3) metres: the 16 joints in MANO order, then the 5 fingertips
             (thumb, index, middle, ring, pinky).
     """
@@ -73,10 +88,18 @@ class HandModel(torch.nn.Module):
         buf("prior_mean", assets.prior_mean)
         buf("prior_std", assets.prior_std)
         # Fast path when every hand of a batch has the same rest shape (no betas, no pose blend shapes):
-        # skinning becomes one GEMM, vertices[v] = sum_{k, j} (w_vk [v_rest | 1]_j) A_k[:, j].
+        # skinning becomes one GEMM, v[c, v] = sum_{k, j} A_k[c, j] (w_vk [v_rest | 1]_j) + trans[c] * 1,
+        # computed coordinate-major, (B*3, 65) @ (65, V), so that the vertices are contiguous as
+        # (B, 3, V): the layout that the optimiser's per-axis tests and gradients stream through.
         vh = torch.cat([self.rest_vertices, torch.ones_like(self.rest_vertices[:, :1])], 1)  # (V, 4)
-        self.register_buffer("skin_rest", (self.weights[:, :, None] * vh[:, None, :]).reshape(-1, 4 * N_JOINTS),
-                             persistent=False)
+        skin = (self.weights[:, :, None] * vh[:, None, :]).reshape(-1, 4 * N_JOINTS)  # (V, 64)
+        skin_t = torch.cat([skin.T, torch.ones_like(skin[:, :1]).T])  # (65, V): last row for the translation
+        self.register_buffer("skin_rest_t", skin_t.contiguous(), persistent=False)
+
+    @staticmethod
+    def _chain_offsets(j_rest: torch.Tensor) -> list[torch.Tensor]:
+        """(B, n, 3) rest offsets of each level's joints from their parents."""
+        return [j_rest[:, ks] - j_rest[:, [PARENTS[k] for k in ks]] for ks, _ in _CHAIN]
 
     @property
     def n_vertices(self) -> int:
@@ -121,33 +144,30 @@ class HandModel(torch.nn.Module):
             feat = (rot[:, 1:] - eye).reshape(b, 135)
             v_rest = v_rest + (feat @ self.pose_dirs).reshape(b, -1, 3)
 
-        # Global rotations and joint positions, one tree level at a time.
-        g_rot = [None] * N_JOINTS
-        g_pos = [None] * N_JOINTS
-        g_rot[0], g_pos[0] = rot[:, 0], j_rest[:, 0]
-        for level in _LEVELS[1:]:
-            ks = list(level)
-            ps = [PARENTS[k] for k in ks]
-            pr = torch.stack([g_rot[p] for p in ps], 1)  # (B, 5, 3, 3)
-            pp = torch.stack([g_pos[p] for p in ps], 1)  # (B, 5, 3)
-            offset = j_rest[:, ks] - j_rest[:, ps]  # (B, 5, 3)
-            r = pr @ rot[:, ks]
-            pos = pp + (pr @ offset[..., None])[..., 0]
-            for i, k in enumerate(ks):
-                g_rot[k], g_pos[k] = r[:, i], pos[:, i]
-        R = torch.stack(g_rot, 1)  # (B, 16, 3, 3)
-        P = torch.stack(g_pos, 1)  # (B, 16, 3)
+        # Global rotations and joint positions, one tree level at a time (a level's joints are chained
+        # onto the previous level's as whole (B, n, 3, 3) blocks), then back into joint order.
+        r_lvl, p_lvl = rot[:, :1], j_rest[:, :1]
+        rs, ps = [r_lvl], [p_lvl]
+        for (ks, pidx), offset in zip(_CHAIN, self._chain_offsets(j_rest)):
+            pr, pp = (r_lvl, p_lvl) if pidx is None else (r_lvl[:, pidx], p_lvl[:, pidx])
+            r_lvl = pr @ rot[:, ks]
+            p_lvl = pp + (pr @ offset[..., None])[..., 0]
+            rs.append(r_lvl)
+            ps.append(p_lvl)
+        R = torch.cat(rs, 1)[:, _LEVEL_ORDER_INV]  # (B, 16, 3, 3)
+        P = torch.cat(ps, 1)[:, _LEVEL_ORDER_INV]  # (B, 16, 3)
         # Skinning transforms [R | P - R J_rest], blended per vertex.
         t = P - (R @ j_rest[..., None])[..., 0]
         A = torch.cat([R, t[..., None]], -1)  # (B, 16, 3, 4)
+        trans = pose[:, None, :3]
         if betas is None and self.pose_dirs is None:
-            a2 = A.permute(1, 3, 0, 2).reshape(4 * N_JOINTS, b * 3)  # (64, B*3)
-            verts = (self.skin_rest @ a2).reshape(-1, b, 3).transpose(0, 1)  # (B, V, 3)
+            a2 = torch.cat([A.permute(0, 2, 1, 3).reshape(b, 3, 4 * N_JOINTS), trans.transpose(1, 2)], 2)  # (B, 3, 65)
+            verts_t = (a2.reshape(b * 3, -1) @ self.skin_rest_t).reshape(b, 3, -1)  # (B, 3, V)
+            verts = verts_t.transpose(1, 2)  # (B, V, 3): a view, each coordinate contiguous
+            tips = verts_t[:, :, self.tip_ids].transpose(1, 2)  # indexed in that layout: so is its gradient
         else:
             T = torch.matmul(self.weights, A.reshape(b, N_JOINTS, 12)).reshape(b, -1, 3, 4)  # (B, V, 3, 4)
-            verts = (T[..., :3] * v_rest[:, :, None, :]).sum(-1) + T[..., 3]
-        trans = pose[:, None, :3]
-        verts = verts + trans
-        tips = verts[:, self.tip_ids]
+            verts = (T[..., :3] * v_rest[:, :, None, :]).sum(-1) + T[..., 3] + trans
+            tips = verts[:, self.tip_ids]
         joints = torch.cat([P + trans, tips], 1)
         return HandOutput(vertices=verts, joints=joints)

@@ -7,7 +7,7 @@ rule prior_synthesis:
         object="results/objects/{object}",
         hand="results/hand/hand.npz",
         code=code("grasps/synthesis", "grasps/filter", "grasps/prior", "geometry/sdf", "geometry/raycast",
-                  "metrics/quality", "data/grasps", "config"),
+                  "metrics/quality", "data/grasps", "config", "runtime"),
     output:
         directory("results/grasps/prior/raw/{object}.zarr"),
     params:
@@ -49,7 +49,7 @@ rule prior_filter:
 rule prior_summary:
     input:
         stores=prior_stores,
-        code=code("grasps/prior", "data/grasps"),
+        code=code("grasps/filter", "data/grasps"),
     output:
         "results/grasps/prior/summary.csv",
     conda:
