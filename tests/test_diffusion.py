@@ -215,3 +215,14 @@ def test_grasp_losses_vanish_for_the_truth_and_grow_with_error(hand):
     assert off["diff"] > 0 and off["recon"] == pytest.approx(1e-4, rel=1e-3) and off["cons"] > 0
     # Points 4 mm outside the true hand are (nearly) all outside it; 1 cm deeper they are inside.
     assert off["pen"] > 5 * exact["pen"] and off["pen"] > 0.01
+
+
+def test_normaliser_of_a_single_grasp_is_finite():
+    """A training split with one task grasp (small runs have them) must not give a NaN std."""
+    model = GraspDiffuser(GraspDiffuserConfig(d_model=16, n_blocks=1, pointnet=SMALL_PN))
+    grasp = torch.randn(1, 51, generator=torch.Generator().manual_seed(0))
+    model.set_normaliser(grasp)
+    assert torch.isfinite(model.grasp_std).all() and (model.grasp_std == 1e-3).all()
+    assert torch.isfinite(model.normalise(grasp)).all()
+    with pytest.raises(ValueError, match="set_normaliser"):
+        model.set_normaliser(torch.zeros(0, 51))

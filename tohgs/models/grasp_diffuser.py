@@ -71,9 +71,13 @@ class GraspDiffuser(nn.Module):
         self.register_buffer("grasp_std", torch.ones(51))
 
     def set_normaliser(self, grasps: torch.Tensor) -> None:
-        """Per-dimension mean and std of (G, 51) training grasps (std floored at 1e-3)."""
+        """Per-dimension mean and std of (G, 51) training grasps (std floored at 1e-3; a single grasp has
+        no spread, so its std is that floor, where the unbiased std would be NaN and poison training)."""
+        if grasps.ndim != 2 or grasps.shape[0] == 0:
+            raise ValueError(f"set_normaliser needs (G >= 1, 51) grasps, got {tuple(grasps.shape)}")
         self.grasp_mean.copy_(grasps.mean(0))
-        self.grasp_std.copy_(grasps.std(0).clamp_min(1e-3))
+        std = grasps.std(0) if grasps.shape[0] > 1 else torch.zeros_like(grasps[0])
+        self.grasp_std.copy_(std.clamp_min(1e-3))
 
     def normalise(self, g: torch.Tensor) -> torch.Tensor:
         return (g - self.grasp_mean) / self.grasp_std
