@@ -3,6 +3,8 @@ and the grasp losses."""
 
 from __future__ import annotations
 
+from dataclasses import asdict
+
 import numpy as np
 import pytest
 import torch
@@ -162,9 +164,10 @@ def test_contact_diffuser_overfits_one_batch_and_reloads_to_identical_samples(tm
         opt.step()
         losses.append(loss.item())
     assert losses[-1] < 0.1 * losses[0], (losses[0], losses[-1])
-    torch.save({"cfg": model.cfg, "state": model.state_dict()}, tmp_path / "m.pt")
-    again = ContactDiffuser(torch.load(tmp_path / "m.pt", weights_only=False)["cfg"])
-    again.load_state_dict(torch.load(tmp_path / "m.pt", weights_only=False)["state"])
+    torch.save({"cfg": asdict(model.cfg), "state": model.state_dict()}, tmp_path / "m.pt")
+    saved = torch.load(tmp_path / "m.pt", weights_only=True)
+    again = ContactDiffuser(ContactDiffuserConfig.from_dict(saved["cfg"]))
+    again.load_state_dict(saved["state"])
     model.eval(), again.eval()
     outs = []
     for m in (model, again):

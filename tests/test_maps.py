@@ -111,8 +111,8 @@ def built(tmp_path_factory):
                                 ExpansionSettings())
     (tmp / "task").mkdir()
     write_task_grasps(out, {"task": "placing", "object": "brick-cube"}, tmp / "task" / "brick-cube.zarr")
-    kw = dict(task="placing", split="train", n_shards=1, objects=["brick-cube"], scenes_dir=tmp / "scenes",
-              task_grasps_dir=tmp / "task", objects_dir=tmp / "objects",
+    kw = dict(task="placing", split="train", n_shards=1, scene_stores=[tmp / "scenes" / "brick-cube.zarr"],
+              task_grasp_stores=[tmp / "task" / "brick-cube.zarr"], objects_dir=tmp / "objects",
               supports_json=tmp / "objects/supports/supports.json", hand=hand.assets,
               settings={"n_points": 256, "n_scene_points": 600, "scene_radius": 0.15}, test_configs=10, seed=0)
     shard = make_map_shard(shard=0, out=tmp / "shard-0.zarr", **kw)

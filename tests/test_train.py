@@ -64,7 +64,7 @@ def test_an_interrupted_run_resumes_to_the_same_weights(trained, monkeypatch):
     monkeypatch.setattr(torch.nn.utils, "clip_grad_norm_", real)
     resumed = train_model("contact_diffuser", "placing", [tmp / "shard-0.zarr"], TINY["contact_diffuser"], SETTINGS,
                           target, hand=hand)
-    straight = torch.load(paths["contact_diffuser"], weights_only=False)
+    straight = torch.load(paths["contact_diffuser"], weights_only=True)
     for k, v in straight["state_dict"].items():
         torch.testing.assert_close(resumed["state_dict"][k], v, msg=k)
 

@@ -87,11 +87,6 @@ def _semantic_checks(cfg: Mapping[str, Any], base_dir: Path) -> None:
     if tmin > tmax:
         raise ConfigError(f"config key 'objects.size.thickness_min': {tmin} is larger than objects.size.thickness_max = {tmax}")
     sc = cfg["scenes"]
-    for key in ("placing", "shelving"):
-        for pair in ("obstacles", "obstacle_gap"):
-            lo_, hi_ = sc[key][pair]
-            if lo_ > hi_:
-                raise ConfigError(f"config key 'scenes.{key}.{pair}': [min, max] = [{lo_}, {hi_}] is not ordered")
     if sc["stacking"]["min_goal_distance"] > sc["stacking"]["max_goal_distance"]:
         raise ConfigError("config key 'scenes.stacking.min_goal_distance': larger than scenes.stacking.max_goal_distance")
     src = obj["sources"]
@@ -106,6 +101,22 @@ def _semantic_checks(cfg: Mapping[str, Any], base_dir: Path) -> None:
     if n_total == 0 and dir_path is None:
         raise ConfigError("config key 'objects.sources': the selection is empty (no pybullet_data objects, "
                           "no bricks and no dir.path)")
+
+
+def _ordered_ranges(cfg: Mapping[str, Any], schema: Mapping[str, Any]) -> None:
+    """Every ``[min, max]`` pair the schema marks ``x-ordered`` must have min <= max."""
+    for parts, sub in iter_schema_keys(schema):
+        if not sub.get("x-ordered"):
+            continue
+        value: Any = cfg
+        for p in parts:
+            if not isinstance(value, Mapping) or p not in value:
+                break
+            value = value[p]
+        else:
+            lo, hi = value
+            if lo > hi:
+                raise ConfigError(f"config key '{_key_path(parts)}': [min, max] = [{lo}, {hi}] is not ordered")
 
 
 def validate_config(cfg: dict[str, Any], schema: Mapping[str, Any] | None = None,
@@ -132,6 +143,7 @@ def validate_config(cfg: dict[str, Any], schema: Mapping[str, Any] | None = None
     errors = sorted(validator.iter_errors(cfg), key=lambda e: (len(e.absolute_path), list(map(str, e.absolute_path))))
     if errors:
         raise ConfigError(_error_message(errors[0]))
+    _ordered_ranges(cfg, schema)
     _semantic_checks(cfg, base)
     return cfg
 

@@ -1,17 +1,19 @@
 """Small I/O helpers shared by every stage: atomic writes, content keys for caches, logging set-up.
 
 A job writes into a temporary sibling path and renames it into place at the end, so a killed job never
-leaves an output that looks complete.
+leaves an output that looks complete; the next writer of that path removes what a killed one left behind.
 """
 
 from __future__ import annotations
 
 import contextlib
+import glob
 import hashlib
 import json
 import logging
 import os
 import shutil
+import socket
 import sys
 import tempfile
 from collections.abc import Iterator
@@ -22,12 +24,56 @@ _UMASK = os.umask(0)
 os.umask(_UMASK)
 
 
+def _tmp_prefix(path: Path) -> str:
+    """The name prefix of ``path``'s temporary siblings: ``.<name>.<host>-<pid>.``, so that a later writer
+    can tell the leftovers of a killed process (same host, process gone) from a live one's."""
+    return f".{path.name}.{_host()}-{os.getpid()}."
+
+
+def _host() -> str:
+    return socket.gethostname().replace(".", "_")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's live process
+        return True
+    return True
+
+
+def remove_stale_temporaries(path: str | Path) -> list[Path]:
+    """Remove the temporary siblings of ``path`` that a killed writer on this host left behind (its process
+    no longer exists); a live writer's, or another host's, are kept. Returns the removed paths."""
+    path = Path(path)
+    host = _host()
+    removed = []
+    if not path.parent.is_dir():
+        return removed
+    for tmp in path.parent.glob(f".{glob.escape(path.name)}.*.tmp"):
+        rest = tmp.name[len(path.name) + 2:]  # "<host>-<pid>.<random>.tmp"
+        owner = rest.split(".", 1)[0]
+        h, _, pid = owner.rpartition("-")
+        if h != host or not pid.isdigit() or _alive(int(pid)):
+            continue
+        if tmp.is_dir():
+            shutil.rmtree(tmp, ignore_errors=True)
+        else:
+            tmp.unlink(missing_ok=True)
+        removed.append(tmp)
+    return removed
+
+
 @contextlib.contextmanager
 def atomic_dir(path: str | Path) -> Iterator[Path]:
-    """Yield a fresh temporary folder next to ``path``; on success it replaces ``path``, on error it is removed."""
+    """Yield a fresh temporary folder next to ``path``; on success it replaces ``path``, on error it is removed.
+    Leftover temporary folders of killed writers of ``path`` are removed first."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    remove_stale_temporaries(path)
+    tmp = Path(tempfile.mkdtemp(prefix=_tmp_prefix(path), suffix=".tmp", dir=path.parent))
     os.chmod(tmp, 0o777 & ~_UMASK)
     try:
         yield tmp
@@ -41,10 +87,12 @@ def atomic_dir(path: str | Path) -> Iterator[Path]:
 
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary file path next to ``path``; on success it is renamed to ``path``."""
+    """Yield a temporary file path next to ``path``; on success it is renamed to ``path``. Leftover
+    temporary files of killed writers of ``path`` are removed first."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    remove_stale_temporaries(path)
+    fd, tmp = tempfile.mkstemp(prefix=_tmp_prefix(path), suffix=".tmp", dir=path.parent)
     os.close(fd)
     os.chmod(tmp, 0o666 & ~_UMASK)
     tmp_path = Path(tmp)

@@ -68,9 +68,15 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
         raise MeshError(f"{path}: cannot be read ({type(exc).__name__}: {exc})") from exc
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise MeshError(f"{path}: no triangles in the file")
+    faces = np.asarray(loaded.faces)
+    n_vertices = len(loaded.vertices)
+    if faces.ndim != 2 or faces.shape[1] != 3:
+        raise MeshError(f"{path}: faces of shape {faces.shape}, not triangles (a truncated or malformed file?)")
+    if faces.min() < 0 or faces.max() >= n_vertices:
+        raise MeshError(f"{path}: faces refer to vertices {int(faces.min())}..{int(faces.max())} of {n_vertices} "
+                        "(a truncated or malformed file?)")
     # Drop visuals (uv seams duplicate vertices) and merge coincident vertices.
-    mesh = trimesh.Trimesh(np.asarray(loaded.vertices, dtype=np.float64),
-                           np.asarray(loaded.faces, dtype=np.int64), process=False)
+    mesh = trimesh.Trimesh(np.asarray(loaded.vertices, dtype=np.float64), faces.astype(np.int64), process=False)
     return mesh
 
 

@@ -16,7 +16,6 @@ by object, per task set, deterministically for the seed.
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 import zlib
@@ -30,7 +29,7 @@ import trimesh
 from tohgs.assets.bricks import make_brick
 from tohgs.assets.decomposition import DecompositionSettings, convex_decomposition
 from tohgs.assets.mesh import MeshError, choose_scale, load_mesh, mass_properties, normalise, repair_and_validate
-from tohgs.assets.sources import TASK_SET_BRICKS, TASK_SET_OBJECTS, ObjectSpec
+from tohgs.assets.sources import TASK_SET_BRICKS, TASK_SET_OBJECTS, ObjectSpec, read_object_meta
 from tohgs.io import atomic_dir, atomic_path, write_json
 
 log = logging.getLogger(__name__)
@@ -110,8 +109,8 @@ def prepare_object(spec: dict[str, Any] | ObjectSpec, out_dir: str | Path, size:
                    cache_dir: str | Path | None) -> dict[str, Any]:
     """Run the objects stage for one object and write its folder atomically.
 
-    A bad mesh does not raise: the folder then holds a ``meta.json`` with ``status: rejected`` and the
-    reason, so the rest of the run proceeds.
+    A bad mesh does not raise (whatever trimesh or the repair raise on it): the folder then holds a
+    ``meta.json`` with ``status: rejected`` and the reason, so the rest of the run proceeds.
 
     Returns:
         The metadata written to ``meta.json``.
@@ -123,9 +122,10 @@ def prepare_object(spec: dict[str, Any] | ObjectSpec, out_dir: str | Path, size:
     with atomic_dir(out_dir) as tmp:
         try:
             mesh, scale, repairs = build_object_mesh(spec, size, brick_scale, seed)
-        except MeshError as exc:
-            meta.update(status="rejected", reason=str(exc))
-            log.warning("%s rejected: %s", spec.name, exc)
+        except Exception as exc:  # noqa: BLE001 - any failure on a bad file is a rejection, never a crash
+            reason = str(exc) if isinstance(exc, MeshError) else f"invalid mesh ({type(exc).__name__}: {exc})"
+            meta.update(status="rejected", reason=reason)
+            log.warning("%s rejected: %s", spec.name, reason)
             write_json(tmp / "meta.json", meta)
             return meta
         settings = DecompositionSettings(**decomposition)
@@ -147,19 +147,55 @@ def prepare_object(spec: dict[str, Any] | ObjectSpec, out_dir: str | Path, size:
     return meta
 
 
-def assign_splits(names: list[str], test_fraction: float, val_fraction: float, rng: np.random.Generator
-                  ) -> dict[str, str]:
-    """Split object names into ``train``/``val``/``test`` (by object: no object is in two splits).
-
-    ``round(fraction x n)`` objects go to test (at least one when the fraction is positive and there are
-    two or more objects), then to val, the rest to train.
-    """
-    n = len(names)
+def split_sizes(n: int, test_fraction: float, val_fraction: float) -> tuple[int, int, int]:
+    """``(train, val, test)`` object counts of a set of ``n``: ``round(fraction x n)`` objects go to test (at
+    least one when the fraction is positive and there are two or more objects), then to val, the rest to
+    train (at least one where there are two or more objects)."""
     n_test = int(round(test_fraction * n))
     if test_fraction > 0 and n >= 2:
         n_test = max(n_test, 1)
     n_test = min(n_test, n - 1) if n >= 2 else 0
     n_val = min(int(round(val_fraction * n)), n - n_test - 1) if n - n_test >= 2 else 0
+    return n - n_test - n_val, n_val, n_test
+
+
+#: The ``objects.split`` key of each task set.
+SPLIT_KEYS = {TASK_SET_OBJECTS: "objects", TASK_SET_BRICKS: "bricks"}
+
+
+def check_split_sizes(counts: dict[str, int], split_cfg: dict[str, dict[str, float]], task_sets: list[str],
+                      what: str = "selected", detail: str = "") -> None:
+    """Every task set a run uses must give at least one training and one test object.
+
+    Args:
+        counts: objects per task set (``placing/shelving``, ``stacking``).
+        split_cfg: ``objects.split``.
+        task_sets: the task sets of the configured tasks.
+        what: how the objects were counted ("selected" at parse time, "accepted" in the catalog).
+        detail: appended to the message (e.g. the rejected objects and their reasons).
+
+    Raises:
+        ValueError: naming the split key, the counts and what to change.
+    """
+    for ts in task_sets:
+        key = SPLIT_KEYS[ts]
+        n = counts.get(ts, 0)
+        frac = split_cfg[key]
+        train, _, test = split_sizes(n, frac["test"], frac["val"])
+        if test and train:
+            continue
+        missing = "test" if not test else "training"
+        raise ValueError(f"objects.split.{key}: {n} {what} {ts} objects give {train} training and {test} test "
+                         f"objects (test fraction {frac['test']}, val {frac['val']}); the tasks need at least one "
+                         f"{missing} object: select more objects (objects.sources) or change objects.split.{key}"
+                         + (f" ({detail})" if detail else ""))
+
+
+def assign_splits(names: list[str], test_fraction: float, val_fraction: float, rng: np.random.Generator
+                  ) -> dict[str, str]:
+    """Split object names into ``train``/``val``/``test`` (by object: no object is in two splits), with the
+    sizes of :func:`split_sizes`."""
+    _, n_val, n_test = split_sizes(len(names), test_fraction, val_fraction)
     order = rng.permutation(sorted(names))
     split = {str(nm): "test" for nm in order[:n_test]}
     split.update({str(nm): "val" for nm in order[n_test:n_test + n_val]})
@@ -168,7 +204,7 @@ def assign_splits(names: list[str], test_fraction: float, val_fraction: float, r
 
 
 def write_catalog(object_dirs: list[str | Path], split_cfg: dict[str, dict[str, float]], seed: int,
-                  out_csv: str | Path) -> pd.DataFrame:
+                  out_csv: str | Path, task_sets: list[str] | None = None) -> pd.DataFrame:
     """Gather the objects' ``meta.json`` into ``catalog.csv`` with the split by object.
 
     Args:
@@ -176,16 +212,18 @@ def write_catalog(object_dirs: list[str | Path], split_cfg: dict[str, dict[str, 
         split_cfg: ``objects.split``: ``{"objects": {"test": f, "val": f}, "bricks": {...}}``.
         seed: global seed.
         out_csv: the catalog path.
+        task_sets: the task sets the run's tasks use; each must keep a training and a test object after
+            the rejections (None: no check).
 
     Returns:
         The catalog (one row per selected object; rejected objects have split ``""``).
+
+    Raises:
+        ValueError: a task set without training or test objects (the message lists the rejections).
     """
     rows = []
     for d in object_dirs:
-        meta_path = Path(d) / "meta.json"
-        if not meta_path.is_file():
-            raise FileNotFoundError(f"{meta_path}: missing; the objects stage did not finish for this object")
-        m = json.loads(meta_path.read_text())
+        m = read_object_meta(d)
         ext = m.get("extents", [np.nan] * 3)
         rows.append({
             "name": m["name"], "source": m["source"], "task_set": m["task_set"], "split": "",
@@ -196,6 +234,11 @@ def write_catalog(object_dirs: list[str | Path], split_cfg: dict[str, dict[str, 
             "decomposition": m.get("decomposition", ""), "source_path": m.get("path") or "",
         })
     df = pd.DataFrame(rows, columns=CATALOG_COLUMNS)
+    if task_sets:
+        ok = df[df.status == "ok"]
+        rejected = "; ".join(f"{r['name']} rejected: {r['reason']}" for _, r in df[df.status != "ok"].iterrows())
+        check_split_sizes(ok.task_set.value_counts().to_dict(), split_cfg, task_sets, "accepted",
+                          rejected or "no object was rejected")
     for k, (task_set, key) in enumerate([(TASK_SET_OBJECTS, "objects"), (TASK_SET_BRICKS, "bricks")]):
         ok = df[(df.task_set == task_set) & (df.status == "ok")].name.tolist()
         split = assign_splits(ok, split_cfg[key]["test"], split_cfg[key]["val"], np.random.default_rng([seed, 10 + k]))

@@ -13,7 +13,9 @@ the workflow; validation happens per object later and rejections are recorded in
 
 from __future__ import annotations
 
+import json
 import re
+import zlib
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -107,22 +109,41 @@ def brick_candidates() -> list[ObjectSpec]:
     return [ObjectSpec(f"brick-{b}", "bricks", TASK_SET_BRICKS, None, b) for b in brick_names()]
 
 
-def dir_candidates(folder: str | Path) -> list[ObjectSpec]:
-    """Every mesh file (.obj/.stl/.ply) directly in ``folder``, sorted; duplicate stems get a suffix.
+def dir_candidates(folder: str | Path, skipped: list[tuple[str, str]] | None = None) -> list[ObjectSpec]:
+    """Every mesh file (.obj/.stl/.ply) directly in ``folder``, sorted; a name taken by an earlier file gets
+    the suffix (``cup.obj``, ``cup.stl``: ``dir-cup``, ``dir-cup-stl``).
+
+    A stem with no letter or digit of the name alphabet (``日本.obj``) is named by its CRC-32
+    (``dir-u3f2a9c01``: stable, and the catalog's ``source_path`` says which file it is). A path that
+    cannot be written as UTF-8 is skipped, with ``(path, reason)`` appended to ``skipped``.
 
     Raises:
         FileNotFoundError: the folder does not exist.
+        ValueError: two files that would become the same object name (the message names both files).
     """
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(f"objects.sources.dir.path: folder '{folder}' does not exist")
     files = sorted(f for f in folder.iterdir() if f.is_file() and f.suffix.lower() in MESH_SUFFIXES)
-    out, seen = [], set()
+    out: list[ObjectSpec] = []
+    owner: dict[str, Path] = {}
     for f in files:
-        name = f"dir-{sanitise(f.stem)}"
-        if name in seen:
+        try:
+            str(f.resolve()).encode("utf-8")
+        except UnicodeEncodeError:
+            if skipped is not None:
+                skipped.append((repr(str(f)), "the file name is not valid UTF-8"))
+            continue
+        try:
+            name = f"dir-{sanitise(f.stem)}"
+        except ValueError:
+            name = f"dir-u{zlib.crc32(f.stem.encode('utf-8')):08x}"
+        if name in owner:
             name = f"{name}-{f.suffix.lower().lstrip('.')}"
-        seen.add(name)
+        if name in owner:
+            raise ValueError(f"objects.sources.dir.path: the files '{owner[name].name}' and '{f.name}' in {folder} "
+                             f"both become the object name '{name}'; rename one of them")
+        owner[name] = f
         out.append(ObjectSpec(name, "dir", TASK_SET_OBJECTS, str(f.resolve())))
     return out
 
@@ -136,7 +157,8 @@ def _choose(candidates: list[ObjectSpec], count: int | None, rng: np.random.Gene
     return [candidates[i] for i in idx]
 
 
-def select_objects(objects_cfg: dict[str, Any], seed: int, base_dir: str | Path = ".") -> list[ObjectSpec]:
+def select_objects(objects_cfg: dict[str, Any], seed: int, base_dir: str | Path = ".",
+                   skipped: list[tuple[str, str]] | None = None) -> list[ObjectSpec]:
     """Select the run's objects from the ``objects`` config block, deterministically for ``seed``.
 
     Each source draws from its own generator (seeded from ``seed`` and the source), so changing one
@@ -146,6 +168,7 @@ def select_objects(objects_cfg: dict[str, Any], seed: int, base_dir: str | Path 
         objects_cfg: the validated ``objects`` block of the config.
         seed: the global seed.
         base_dir: folder that a relative ``sources.dir.path`` is resolved against.
+        skipped: receives ``(file, reason)`` of the user folder's files that cannot be used.
 
     Returns:
         The selected objects, sources in the order pybullet_data, bricks, dir, each sorted by name.
@@ -165,7 +188,7 @@ def select_objects(objects_cfg: dict[str, Any], seed: int, base_dir: str | Path 
     if src["dir"]["path"] is not None:
         folder = Path(src["dir"]["path"])
         folder = folder if folder.is_absolute() else Path(base_dir) / folder
-        cands = dir_candidates(folder)
+        cands = dir_candidates(folder, skipped)
         count = src["dir"]["count"]
         selected += _choose(cands, None if count == 0 else min(count, len(cands)),
                             np.random.default_rng([seed, 4]), "objects.sources.dir.count")
@@ -176,3 +199,26 @@ def select_objects(objects_cfg: dict[str, Any], seed: int, base_dir: str | Path 
     if dup:
         raise ValueError(f"objects.sources: duplicate object names {sorted(dup)}")
     return selected
+
+
+def accepted_objects(object_dirs: list[str | Path], task_set: str) -> list[str]:
+    """Sorted names of the accepted objects of ``task_set`` among the objects stage's folders (their
+    ``meta.json``), for jobs that must not depend on the catalog checkpoint.
+
+    Raises:
+        FileNotFoundError: a folder without ``meta.json`` (its objects job did not finish).
+    """
+    metas = [read_object_meta(d) for d in object_dirs]
+    return sorted(m["name"] for m in metas if m["status"] == "ok" and m["task_set"] == task_set)
+
+
+def read_object_meta(object_dir: str | Path) -> dict[str, Any]:
+    """The ``meta.json`` of one object's folder (written by :func:`tohgs.assets.objects.prepare_object`).
+
+    Raises:
+        FileNotFoundError: the folder has none (its objects job did not finish).
+    """
+    meta_path = Path(object_dir) / "meta.json"
+    if not meta_path.is_file():
+        raise FileNotFoundError(f"{meta_path}: missing; the objects stage did not finish for this object")
+    return json.loads(meta_path.read_text())

@@ -54,20 +54,37 @@ def shard_items(n_configs: dict[str, int], split: str, test_configs: int, n_shar
     return items[shard::n_shards]
 
 
+class EmptySplitError(ValueError):
+    """A split that trains holds no task grasp (the message has the counts and what to change)."""
+
+
+def empty_split_message(task: str, split: str, attrs: dict[str, dict], grasps: dict[str, dict[str, np.ndarray]]) -> str:
+    """Why a split holds no task grasp: per object the accepted prior grasps, the configurations and the
+    task grasps kept, and the settings that raise them (see the README, "When a split has no grasps")."""
+    rows = "; ".join(f"{o}: {attrs[o].get('n_prior_accepted', '?')} accepted prior grasps -> "
+                     f"{len(grasps[o]['config'])} task grasps over {len(grasps[o]['kept_per_config'])} configurations"
+                     for o in sorted(grasps))
+    return (f"{task}/{split}: the split's {len(grasps)} objects kept no task grasp, so nothing can train on it "
+            f"({rows}). Raise the yield: more prior grasps per object (prior_grasps.synthesis.batch, iterations), "
+            "more configurations per object (scenes.n_configs), more objects in the split "
+            "(objects.sources, objects.split), or a looser collision tolerance (task_grasps.tolerance); see the "
+            "README, \"When a split has no grasps\"")
+
+
 def _object_cloud(objects_dir: Path, name: str, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     mesh = trimesh.load(objects_dir / name / "mesh.obj", force="mesh", process=False)
     return sample_surface(mesh, n, np.random.default_rng([int(seed), zlib.crc32(name.encode())]))
 
 
-def make_map_shard(task: str, split: str, shard: int, n_shards: int, objects: list[str], scenes_dir: str | Path,
-                   task_grasps_dir: str | Path, objects_dir: str | Path, supports_json: str | Path, hand: HandAssets,
-                   settings: dict, test_configs: int, seed: int, out: str | Path) -> MapShard:
+def make_map_shard(task: str, split: str, shard: int, n_shards: int, scene_stores: list[str | Path],
+                   task_grasp_stores: list[str | Path], objects_dir: str | Path, supports_json: str | Path,
+                   hand: HandAssets, settings: dict, test_configs: int, seed: int, out: str | Path) -> MapShard:
     """Build and write shard ``shard`` of ``n_shards`` of one task and split.
 
     Args:
         task, split: the task and the split (``train``, ``val`` or ``test``).
-        objects: the split's target objects.
-        scenes_dir, task_grasps_dir: ``results/scenes/<task>`` and ``results/grasps/task/<task>``.
+        scene_stores, task_grasp_stores: the scene and task-grasp stores of the split's target objects
+            (the same objects; their order does not matter).
         objects_dir, supports_json: the objects stage's outputs.
         hand: the hand's assets (contact maps pose it with :meth:`~tohgs.hand.assets.HandAssets.vertices`;
             the job imports no torch).
@@ -75,6 +92,10 @@ def make_map_shard(task: str, split: str, shard: int, n_shards: int, objects: li
         test_configs: configurations per test object.
         seed: the global seed.
         out: the shard to write.
+
+    Raises:
+        EmptySplitError: a training split whose objects kept no task grasp at all (every shard of the split
+            sees the whole split, so the first of them to run says so, with the counts per object).
     """
     from tohgs.assets.supports import read_supports
     from tohgs.data.scenes import read_scenes
@@ -83,10 +104,19 @@ def make_map_shard(task: str, split: str, shard: int, n_shards: int, objects: li
     s = MapSettings(**settings)
     objects_dir = Path(objects_dir)
     supports = read_supports(supports_json)
-    scenes = {o: read_scenes(Path(scenes_dir) / f"{o}.zarr") for o in objects}
-    grasps = {o: read_task_grasps(Path(task_grasps_dir) / f"{o}.zarr")[0] for o in objects}
+    scenes = {sc.object: sc for sc in map(read_scenes, scene_stores)}
+    grasps, grasp_attrs = {}, {}
+    for p in task_grasp_stores:
+        arrays, attrs = read_task_grasps(p)
+        if attrs.get("task") != task:
+            raise ValueError(f"{p}: task grasps of {attrs.get('task')!r}, expected {task!r}")
+        grasps[attrs["object"]], grasp_attrs[attrs["object"]] = arrays, attrs
+    if set(grasps) != set(scenes):
+        raise ValueError(f"{task}/{split}: scene stores of {sorted(scenes)} but task grasps of {sorted(grasps)}")
+    if split == "train" and scenes and not any(len(g["config"]) for g in grasps.values()):
+        raise EmptySplitError(empty_split_message(task, split, grasp_attrs, grasps))
     items = shard_items({o: len(sc) for o, sc in scenes.items()}, split, test_configs, n_shards, shard)
-    vocab = sorted(objects)
+    vocab = sorted(scenes)
     wrist = np.asarray(hand.rest_joints[0], dtype=np.float64)
     clouds: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     mesh_cache: dict[str, trimesh.Trimesh] = {}

@@ -15,7 +15,7 @@ contact_distance       (B,)        grasp               smallest signed hand-obje
 pass_<check>, passed   (B,)        grasp               filter flags (filtered stores only)
 =====================  ==========  ==================  ===================================================
 
-Root attributes: ``schema``, ``schema_version``, ``object``, ``hand`` (the model's name), ``seed``,
+Root attributes: ``schema``, ``schema_version``, ``manifest`` (:mod:`tohgs.data.store`), ``object``, ``hand`` (the model's name), ``seed``,
 ``config`` (the settings that made it), ``timing`` (seconds per phase) and, in filtered stores,
 ``thresholds`` and ``rejections`` (counts by check).
 """
@@ -23,11 +23,12 @@ Root attributes: ``schema``, ``schema_version``, ``object``, ``hand`` (the model
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from tohgs.data.store import read_store, write_store
 
 SCHEMA = "tohgs.prior_grasps"
 SCHEMA_VERSION = 1
@@ -88,10 +89,6 @@ class PriorGrasps:
 
 def write_prior_grasps(grasps: PriorGrasps, path: str | Path) -> None:
     """Write a :class:`PriorGrasps` as a Zarr v3 store, atomically."""
-    import zarr
-
-    from tohgs.io import atomic_dir
-
     grasps.validate(str(path))
     arrays: dict[str, tuple[np.ndarray, tuple[str, ...]]] = {
         "pose": (grasps.pose.astype(np.float32), ("grasp", "param")),
@@ -104,15 +101,8 @@ def write_prior_grasps(grasps: PriorGrasps, path: str | Path) -> None:
         arrays[m] = (getattr(grasps, m).astype(np.float64), ("grasp",))
     for k, v in (grasps.flags or {}).items():
         arrays[k if k == "passed" else f"pass_{k}"] = (v.astype(bool), ("grasp",))
-    with atomic_dir(path) as tmp:
-        root = zarr.open_group(str(tmp), mode="w", zarr_format=3)
-        root.attrs.update({**grasps.attrs, "schema": SCHEMA, "schema_version": SCHEMA_VERSION,
-                           "object": grasps.object, "filtered": grasps.flags is not None})
-        for name, (data, dims) in arrays.items():
-            arr = root.create_array(name, shape=data.shape, dtype=data.dtype, dimension_names=dims,
-                                    chunks=tuple(max(1, s) for s in data.shape))
-            if data.size:
-                arr[...] = data
+    write_store(path, arrays, {**grasps.attrs, "object": grasps.object, "filtered": grasps.flags is not None},
+                SCHEMA, SCHEMA_VERSION)
 
 
 def read_prior_grasps(path: str | Path, filtered: bool | None = None) -> PriorGrasps:
@@ -123,45 +113,26 @@ def read_prior_grasps(path: str | Path, filtered: bool | None = None) -> PriorGr
         filtered: require a filtered (True) or raw (False) store; None accepts either.
 
     Raises:
-        ValueError: not a tohgs prior-grasp store, a wrong schema version, missing or inconsistent arrays
-            (the message names the store and the problem).
+        ValueError: not a tohgs prior-grasp store, a wrong schema version, missing, damaged or inconsistent
+            arrays (the message names the store and the problem).
     """
-    import zarr
-
-    path = Path(path)
-    if not path.is_dir():
-        raise ValueError(f"{path}: prior-grasp store not found")
-    try:
-        with warnings.catch_warnings():  # Snakemake's marker file in directory outputs is not Zarr
-            warnings.filterwarnings("ignore", message=".*snakemake_timestamp")
-            root = zarr.open_group(str(path), mode="r")
-            names = set(root.array_keys())
-    except Exception as exc:
-        raise ValueError(f"{path}: not a Zarr store ({exc})") from exc
-    attrs = dict(root.attrs)
-    if attrs.get("schema") != SCHEMA:
-        raise ValueError(f"{path}: not a tohgs prior-grasp store (schema {attrs.get('schema')!r})")
-    if attrs.get("schema_version") != SCHEMA_VERSION:
-        raise ValueError(f"{path}: schema version {attrs.get('schema_version')}, this tohgs reads {SCHEMA_VERSION}")
+    arrays, attrs = read_store(path, SCHEMA, SCHEMA_VERSION, None, "prior-grasp store")
     if filtered is not None and bool(attrs.get("filtered")) != filtered:
         raise ValueError(f"{path}: expected a {'filtered' if filtered else 'raw'} store")
 
     def get(name: str) -> np.ndarray:
-        if name not in names:
+        if name not in arrays:
             raise ValueError(f"{path}: missing array '{name}'")
-        try:
-            return np.asarray(root[name][...])
-        except Exception as exc:
-            raise ValueError(f"{path}: array '{name}' is unreadable ({exc})") from exc
+        return arrays[name]
 
     flags = None
     if attrs.get("filtered"):
-        flags = {n[len("pass_"):]: get(n) for n in sorted(names) if n.startswith("pass_")}
+        flags = {n[len("pass_"):]: get(n) for n in sorted(arrays) if n.startswith("pass_")}
         flags["passed"] = get("passed")
     grasps = PriorGrasps(
         object=str(attrs.get("object")), pose=get("pose").astype(np.float32), contact_idx=get("contact_idx"),
         plane=get("plane"), energies={k: get(f"energy_{k}") for k in ENERGY_TERMS}, pv=get("pv"), sd=get("sd"),
         contact_distance=get("contact_distance"), flags=flags,
-        attrs={k: v for k, v in attrs.items() if k not in ("schema", "schema_version", "object", "filtered")})
+        attrs={k: v for k, v in attrs.items() if k not in ("object", "filtered")})
     grasps.validate(str(path))
     return grasps

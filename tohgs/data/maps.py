@@ -26,7 +26,7 @@ contact            (G, N)        grasp, point          contact map (alpha 100) o
 
 ``goal_transform`` is a world-frame transform; in the network frame it is ``S T S^-1`` with ``S`` the
 translation by ``-centroid`` (:func:`network_goal_transform`). Root attributes: ``schema``,
-``schema_version``, ``task``, ``split``, ``shard``, ``n_shards``, ``objects``, ``hand_wrist`` (the hand's
+``schema_version``, ``manifest`` (:mod:`tohgs.data.store`), ``task``, ``split``, ``shard``, ``n_shards``, ``objects``, ``hand_wrist`` (the hand's
 rest wrist joint, needed to rotate grasp vectors), ``alpha_distance``, ``alpha_contact``, ``seed`` and
 ``config``.
 """

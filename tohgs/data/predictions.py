@@ -12,7 +12,7 @@ grasp_init      (C, S, 51)    config, sample, param  grasp at the target's initi
 grasp_goal      (C, S, 51)    config, sample, param  the same hand carried to the goal pose, world frame
 ==============  ============  =====================  ==============================================
 
-Root attributes: ``schema``, ``schema_version``, ``task``, ``method``, ``objects``, ``contact_source``,
+Root attributes: ``schema``, ``schema_version``, ``manifest`` (:mod:`tohgs.data.store`), ``task``, ``method``, ``objects``, ``contact_source``,
 ``config`` (the sampling settings) and ``timing`` (seconds per grasp and per contact map).
 """
 

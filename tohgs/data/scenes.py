@@ -17,7 +17,7 @@ obstacle_pose         (O, 7)        obstacle, pose      settled obstacle poses (
 ====================  ============  ==================  =============================================
 
 Poses are ``[x, y, z, qx, qy, qz, qw]`` (metres, scipy's xyzw quaternion order) of each object's mesh
-frame. Root attributes: ``schema``, ``schema_version``, ``task``, ``object``, ``seed``, ``config`` (the
+frame. Root attributes: ``schema``, ``schema_version``, ``manifest`` (:mod:`tohgs.data.store`), ``task``, ``object``, ``seed``, ``config`` (the
 settings that made it), ``objects`` and ``supports`` (the vocabularies), ``n_requested``, ``tries`` and
 ``rejections`` (counts by reason).
 """
@@ -29,6 +29,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from tohgs.data.store import read_store, write_store
 
 SCHEMA = "tohgs.scenes"
 SCHEMA_VERSION = 1
@@ -108,55 +110,22 @@ class SceneSet:
 
 def write_scenes(scenes: SceneSet, path: str | Path) -> None:
     """Write a :class:`SceneSet` as a Zarr v3 store, atomically (temporary folder, then rename)."""
-    import zarr
-
-    from tohgs.io import atomic_dir
-
     scenes.validate(str(path))
-    with atomic_dir(path) as tmp:
-        root = zarr.open_group(str(tmp), mode="w", zarr_format=3)
-        root.attrs.update({**scenes.attrs, "schema": SCHEMA, "schema_version": SCHEMA_VERSION, "task": scenes.task,
-                           "object": scenes.object, "objects": list(scenes.objects), "supports": list(scenes.supports)})
-        for name, (dims, dtype) in _ARRAYS.items():
-            data = np.ascontiguousarray(getattr(scenes, name), dtype=dtype)
-            arr = root.create_array(name, shape=data.shape, dtype=dtype, dimension_names=dims,
-                                    chunks=tuple(max(1, s) for s in data.shape) or None)
-            if data.size:
-                arr[...] = data
+    arrays = {name: (np.asarray(getattr(scenes, name), dtype=dtype), dims) for name, (dims, dtype) in _ARRAYS.items()}
+    attrs = {k: v for k, v in scenes.attrs.items() if k not in ("task", "object", "objects", "supports")}
+    write_store(path, arrays, {**attrs, "task": scenes.task, "object": scenes.object, "objects": list(scenes.objects),
+                               "supports": list(scenes.supports)}, SCHEMA, SCHEMA_VERSION)
 
 
 def read_scenes(path: str | Path) -> SceneSet:
     """Open and validate a scene store.
 
     Raises:
-        ValueError: not a tohgs scene store, a wrong schema version, missing arrays or inconsistent
-            contents (the message names the store and the problem).
+        ValueError: not a tohgs scene store, a wrong schema version, missing or damaged arrays or
+            inconsistent contents (the message names the store and the problem).
     """
-    import zarr
-
-    path = Path(path)
-    if not path.is_dir():
-        raise ValueError(f"{path}: scene store not found")
-    try:
-        root = zarr.open_group(str(path), mode="r")
-    except Exception as exc:
-        raise ValueError(f"{path}: not a Zarr store ({exc})") from exc
-    attrs = dict(root.attrs)
-    if attrs.get("schema") != SCHEMA:
-        raise ValueError(f"{path}: not a tohgs scene store (schema {attrs.get('schema')!r})")
-    if attrs.get("schema_version") != SCHEMA_VERSION:
-        raise ValueError(f"{path}: schema version {attrs.get('schema_version')}, this tohgs reads {SCHEMA_VERSION}")
-    arrays = {}
-    for name, (dims, _) in _ARRAYS.items():
-        if name not in root:
-            raise ValueError(f"{path}: missing array '{name}'")
-        arr = root[name]
-        if tuple(arr.metadata.dimension_names or ()) != dims:
-            raise ValueError(f"{path}: array '{name}' has dimension_names {arr.metadata.dimension_names}, expected {dims}")
-        try:
-            arrays[name] = np.asarray(arr[...])
-        except Exception as exc:
-            raise ValueError(f"{path}: array '{name}' cannot be read ({exc})") from exc
+    arrays, attrs = read_store(path, SCHEMA, SCHEMA_VERSION, list(_ARRAYS), "scene store",
+                               dims={name: dims for name, (dims, _) in _ARRAYS.items()})
     scenes = SceneSet(task=attrs["task"], object=attrs["object"], objects=list(attrs["objects"]),
                       supports=list(attrs["supports"]), attrs=attrs, **arrays)
     scenes.validate(str(path))

@@ -1,23 +1,39 @@
-"""The Zarr v3 plumbing every tohgs store shares: atomic writes with ``dimension_names`` and a schema,
-and a validating open that names the store and the problem.
+"""The Zarr v3 plumbing every tohgs store shares: atomic writes with ``dimension_names``, a schema and a
+manifest, and a validating open that names the store and the problem.
 
-Each store module (:mod:`tohgs.data.task_grasps`, :mod:`tohgs.data.maps`, :mod:`tohgs.data.predictions`)
-defines its arrays and checks their shapes; this module writes and reads them.
+Each store module (:mod:`tohgs.data.scenes`, :mod:`tohgs.data.grasps`, :mod:`tohgs.data.task_grasps`,
+:mod:`tohgs.data.maps`, :mod:`tohgs.data.predictions`) defines its arrays and checks their shapes; this
+module writes and reads them.
+
+**The manifest.** Zarr reads a chunk file that is missing (deleted, or a shard file cut to nothing) as the
+array's fill value, silently. So every store records, as the last step inside its atomic write, a manifest
+in the root attributes: per array its shape, dtype and the SHA-256 of its bytes. A read checks each array
+it returns against it, so a missing or damaged chunk fails with the store's and the array's name instead
+of reading as zeros.
 """
 
 from __future__ import annotations
 
+import hashlib
 import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+MANIFEST = "manifest"
+_RESERVED = ("schema", "schema_version", MANIFEST)
+
+
+def array_digest(data: np.ndarray) -> str:
+    """The SHA-256 (hex) of an array's C-ordered bytes (its shape and dtype are recorded beside it)."""
+    return hashlib.sha256(np.ascontiguousarray(data).tobytes()).hexdigest()
+
 
 def write_store(path: str | Path, arrays: dict[str, tuple[np.ndarray, tuple[str, ...]]], attrs: dict[str, Any],
                 schema: str, version: int, shard_rows: int | None = None) -> None:
-    """Write ``{name: (data, dimension_names)}`` and ``attrs`` (plus ``schema`` and ``schema_version``) as a
-    Zarr v3 group, atomically (temporary folder, then rename).
+    """Write ``{name: (data, dimension_names)}`` and ``attrs`` (plus ``schema``, ``schema_version`` and the
+    manifest) as a Zarr v3 group, atomically (temporary folder, then rename).
 
     With ``shard_rows``, every array uses the sharding codec: inner chunks of ``shard_rows`` rows along the
     first axis inside one shard file per array; otherwise one chunk per array.
@@ -26,11 +42,17 @@ def write_store(path: str | Path, arrays: dict[str, tuple[np.ndarray, tuple[str,
 
     from tohgs.io import atomic_dir
 
+    clash = set(attrs) & set(_RESERVED)
+    if clash:
+        raise ValueError(f"{path}: attributes {sorted(clash)} are reserved for the store layer")
+    manifest: dict[str, dict[str, Any]] = {}
     with atomic_dir(path) as tmp:
         root = zarr.open_group(str(tmp), mode="w", zarr_format=3)
         root.attrs.update({**attrs, "schema": schema, "schema_version": version})
         for name, (data, dims) in arrays.items():
             data = np.ascontiguousarray(data)
+            if len(dims) != data.ndim:
+                raise ValueError(f"{path}: array '{name}' has {data.ndim} dimensions but {len(dims)} names {dims}")
             if shard_rows is None:
                 chunks, shards = tuple(max(1, s) for s in data.shape), None
             else:
@@ -41,15 +63,26 @@ def write_store(path: str | Path, arrays: dict[str, tuple[np.ndarray, tuple[str,
                                     dimension_names=dims)
             if data.size:
                 arr[...] = data
+            manifest[name] = {"shape": list(data.shape), "dtype": data.dtype.str, "sha256": array_digest(data)}
+        root.attrs[MANIFEST] = manifest  # last: a store without it was not finished
 
 
-def read_store(path: str | Path, schema: str, version: int, names: list[str], kind: str
-               ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """Open a store and read ``names``; ``(arrays, attrs)`` without the schema keys.
+def read_store(path: str | Path, schema: str, version: int, names: list[str] | None, kind: str,
+               dims: dict[str, tuple[str, ...]] | None = None) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Open a store and read ``names`` (None: every array of its manifest); ``(arrays, attrs)`` without the
+    store layer's keys.
+
+    Args:
+        path: the store.
+        schema, version: what the store must be.
+        names: the arrays to read.
+        kind: what the store should be, for messages ("map shard", ...).
+        dims: optional ``{name: dimension_names}`` the arrays must have.
 
     Raises:
-        ValueError: a missing store, not Zarr, another schema, another version, a missing, unreadable or
-            truncated array. The message names the store (``kind`` says what it should be).
+        ValueError: a missing store, not Zarr, another schema, another version, no manifest, a missing,
+            unreadable or truncated array, or an array that does not match the manifest (a missing or
+            damaged chunk). The message names the store and the array.
     """
     import zarr
 
@@ -68,12 +101,30 @@ def read_store(path: str | Path, schema: str, version: int, names: list[str], ki
         raise ValueError(f"{path}: not a tohgs {kind} (schema {attrs.get('schema')!r})")
     if attrs.get("schema_version") != version:
         raise ValueError(f"{path}: schema version {attrs.get('schema_version')}, this tohgs reads {version}")
+    manifest = attrs.get(MANIFEST)
+    if not isinstance(manifest, dict):
+        raise ValueError(f"{path}: no manifest of its arrays (an unfinished write, or a store of an older tohgs); "
+                         "rebuild it")
     arrays = {}
-    for name in names:
+    for name in sorted(manifest) if names is None else names:
         if name not in present:
             raise ValueError(f"{path}: missing array '{name}'")
+        if name not in manifest:
+            raise ValueError(f"{path}: array '{name}' is not in the store's manifest")
+        arr = root[name]
+        if dims is not None and name in dims and tuple(arr.metadata.dimension_names or ()) != tuple(dims[name]):
+            raise ValueError(f"{path}: array '{name}' has dimension_names {arr.metadata.dimension_names}, "
+                             f"expected {tuple(dims[name])}")
         try:
-            arrays[name] = np.asarray(root[name][...])
+            data = np.asarray(arr[...])
         except Exception as exc:
             raise ValueError(f"{path}: array '{name}' is unreadable or truncated ({exc})") from exc
-    return arrays, {k: v for k, v in attrs.items() if k not in ("schema", "schema_version")}
+        entry = manifest[name]
+        if list(data.shape) != list(entry["shape"]) or data.dtype.str != entry["dtype"]:
+            raise ValueError(f"{path}: array '{name}' is {data.dtype.str} {list(data.shape)}, its manifest says "
+                             f"{entry['dtype']} {entry['shape']}")
+        if array_digest(data) != entry["sha256"]:
+            raise ValueError(f"{path}: array '{name}' does not match its manifest checksum: a chunk file is "
+                             "missing or damaged (Zarr reads a missing chunk as fill values); rebuild the store")
+        arrays[name] = data
+    return arrays, {k: v for k, v in attrs.items() if k not in _RESERVED}

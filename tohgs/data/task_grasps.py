@@ -12,7 +12,7 @@ grasp_goal         (K, 51)   grasp, param      the same hand carried to the goal
 kept_per_config    (C,)      config            grasps kept per configuration
 =================  ========  ================  ====================================================
 
-Root attributes: ``schema``, ``schema_version``, ``task``, ``object``, ``n_prior_accepted``, ``config``.
+Root attributes: ``schema``, ``schema_version``, ``manifest`` (:mod:`tohgs.data.store`), ``task``, ``object``, ``n_prior_accepted``, ``config``.
 """
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ from tohgs.config import settings_from
 from tohgs.data.grasps import ENERGY_TERMS, PriorGrasps, write_prior_grasps
 from tohgs.geometry.sdf import SDFGrid
 from tohgs.grasps.filter import filter_prior_grasps, summarize_prior_grasps  # noqa: F401  (re-exported: the stage's other steps)
-from tohgs.grasps.synthesis import SynthesisSettings, synthesize
+from tohgs.grasps.synthesis import SynthesisSettings, rest_directions, synthesize
 from tohgs.hand.model import HandModel
 from tohgs.io import content_key
 from tohgs.runtime import keep_freed_memory
@@ -103,7 +103,7 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
         synthesis, sdf, sd: config mappings of :class:`SynthesisSettings`, :class:`SDFSettings` and
             :class:`~tohgs.metrics.quality.SDSettings`.
         voxel_pitch: PV's voxel size, m.
-        plane_direction: ``"random"`` (objects) or ``"down"`` (bricks), see :func:`support_planes`.
+        plane_direction: ``"stable"``, ``"random"`` or ``"down"``, see :func:`support_planes`.
         seed: the global seed (combined with the object's name).
         out: the raw store to write.
         cache_dir: cache root for SDF grids and surface voxels (None: no cache).
@@ -128,7 +128,8 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
     grid = object_sdf(mesh, s_sdf, cache_dir)
     timing["sdf"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    result = synthesize(hand, grid, mesh.vertices, s_syn, object_seed(seed, name), progress=True)
+    rest = rest_directions(mesh) if s_syn.plane_direction == "stable" else None
+    result = synthesize(hand, grid, mesh.vertices, s_syn, object_seed(seed, name), progress=True, rest=rest)
     timing["synthesis"] = time.perf_counter() - t0
     log.info("%s: %d grasps, mean energy %.3f -> %.3f in %.1f s", name, s_syn.batch, result.history[0],
              result.history[-1], timing["synthesis"])

@@ -17,8 +17,9 @@ Energy per grasp (weights from DexGraspNet-MANO, all settings in :class:`Synthes
 - ``E_joint``: violation of the anatomical joint limits (sum of hinge distances, radians).
 - ``E_plane``: hand vertices beyond a support plane ``n . v < offset`` (sum of depths), so that grasps
   stay on the free side of a table. A fraction ``plane_fraction`` of the batch gets a plane tangent to the
-  object's far side along a random direction (``"random"``: objects, which rest in any orientation) or
-  under it (``"down"``: bricks, which rest upright); the others have none.
+  object's far side along a direction d: under one of the object's stable rest poses (``"stable"``:
+  objects, which settle on a support in one of them; drawn by their quasi-static probabilities), a
+  random direction (``"random"``) or -z (``"down"``: bricks, which rest upright); the others have none.
 
 Contact normals are the SDF's central differences at the contact points, so they are differentiable in the
 points' positions (treating them as constants, as a first version here did, left E_fc barely moving).
@@ -73,7 +74,7 @@ class SynthesisSettings:
     init_jitter: float = 0.1
     init_preset: str = "relaxed"
     plane_fraction: float = 0.0
-    plane_direction: str = "random"  # or "down"
+    plane_direction: str = "random"  # "random", "stable" (needs rest directions) or "down"
 
 
 @dataclass
@@ -193,19 +194,45 @@ class GraspEnergy:
         return Energies(total, e_fc, e_dis, e_pen, e_prior, e_spen, e_joint, e_plane)
 
 
-def support_planes(vertices: np.ndarray, settings: SynthesisSettings, generator: torch.Generator) -> torch.Tensor:
+def rest_directions(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """The object's stable rest poses on a horizontal support as "down" directions in its mesh frame.
+
+    Args:
+        mesh: a watertight ``trimesh.Trimesh`` (its convex hull and centre of mass are used).
+
+    Returns:
+        (K, 3) unit directions d (the support lies along d: for a rest pose T, ``d = R^T (0, 0, -1)``) and
+        (K,) their quasi-static probabilities (trimesh's estimate), summing to 1.
+    """
+    import trimesh
+
+    transforms, probs = trimesh.poses.compute_stable_poses(mesh, n_samples=1)
+    d = -np.asarray(transforms)[:, 2, :3]  # R^T e_z is the third row of R
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    p = np.asarray(probs, dtype=np.float64)
+    return d, p / p.sum()
+
+
+def support_planes(vertices: np.ndarray, settings: SynthesisSettings, generator: torch.Generator,
+                   rest: tuple[np.ndarray, np.ndarray] | None = None) -> torch.Tensor:
     """(B, 4) support planes ``[nx, ny, nz, offset]`` for the first ``plane_fraction`` of the batch (zero
-    rows for the rest): tangent to the object at its extreme point along a direction d (random unit, or
-    -z for ``plane_direction="down"``), normal ``n = -d`` pointing at the object, so ``n . v >= offset``
-    is the free side."""
+    rows for the rest): tangent to the object at its extreme point along a direction d, normal ``n = -d``
+    pointing at the object, so ``n . v >= offset`` is the free side. d is a random unit vector
+    (``plane_direction="random"``), -z (``"down"``) or the down direction of a rest pose drawn by its
+    probability from ``rest`` = :func:`rest_directions` (``"stable"``)."""
     s, b = settings, settings.batch
     verts = torch.as_tensor(vertices, dtype=torch.float32)
     k = int(round(s.plane_fraction * b))
     d = torch.randn(b, 3, generator=generator)
     if s.plane_direction == "down":
         d = torch.tensor([0.0, 0.0, -1.0]).expand(b, 3).clone()
+    elif s.plane_direction == "stable":
+        if rest is None or len(rest[0]) == 0:
+            raise ValueError("plane_direction 'stable' needs the object's rest directions (rest_directions)")
+        pick = torch.multinomial(torch.as_tensor(rest[1], dtype=torch.float64), b, replacement=True, generator=generator)
+        d = torch.as_tensor(rest[0], dtype=torch.float32)[pick]
     elif s.plane_direction != "random":
-        raise ValueError(f"plane_direction must be 'random' or 'down', not {s.plane_direction!r}")
+        raise ValueError(f"plane_direction must be 'random', 'stable' or 'down', not {s.plane_direction!r}")
     d = d / d.norm(dim=-1, keepdim=True)
     offset = -(verts @ d.T).max(0).values  # n . v >= offset with n = -d  <=>  d . v <= max_v d . v
     planes = torch.cat([-d, offset[:, None]], 1)
@@ -257,7 +284,7 @@ def initial_grasps(hand: HandModel, vertices: np.ndarray, settings: SynthesisSet
 
 
 def synthesize(hand: HandModel, sdf: SDFGrid, vertices: np.ndarray, settings: SynthesisSettings, seed: int,
-               progress: bool = False) -> SynthesisResult:
+               progress: bool = False, rest: tuple[np.ndarray, np.ndarray] | None = None) -> SynthesisResult:
     """Optimise ``settings.batch`` grasps of one object by annealing.
 
     Args:
@@ -267,10 +294,12 @@ def synthesize(hand: HandModel, sdf: SDFGrid, vertices: np.ndarray, settings: Sy
         settings: energy weights and optimiser settings.
         seed: the seed of every random draw (initialisation, contact switches, Metropolis).
         progress: show a progress bar.
+        rest: the object's rest directions and probabilities (:func:`rest_directions`), needed by
+            ``plane_direction="stable"``.
     """
     s = settings
     g = torch.Generator().manual_seed(int(seed))
-    planes = support_planes(vertices, s, g)
+    planes = support_planes(vertices, s, g, rest)
     energy = GraspEnergy(hand, sdf, s, planes)
     pose, contact = initial_grasps(hand, vertices, s, g, planes)
     pose = pose.detach().requires_grad_(True)

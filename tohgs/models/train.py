@@ -113,9 +113,24 @@ class EMA:
 
 
 def pick_device(device: str) -> torch.device:
+    """``"auto"``: CUDA when there is a device, else the CPU; ``"cpu"``; ``"cuda"`` / ``"cuda:k"``, which must exist.
+
+    Raises:
+        ValueError: a CUDA device is asked for where there is none (the message says why and what to set).
+    """
     if device == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(device)
+    dev = torch.device(device)
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            why = ("this torch is a CPU build" if torch.version.cuda is None
+                   else f"torch {torch.__version__} sees no CUDA device")
+            raise ValueError(f"device {device!r} was asked for, but {why}; set the device to 'auto' (CUDA where "
+                             "there is one, else the CPU) or 'cpu'")
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise ValueError(f"device {device!r} was asked for, but there are only {torch.cuda.device_count()} "
+                             "CUDA devices")
+    return dev
 
 
 def _collate(items: list[dict[str, Any]], device: torch.device, keep: np.ndarray | None = None) -> dict[str, torch.Tensor]:
@@ -181,11 +196,9 @@ def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: 
     curve: list[dict[str, float]] = []
     step, spent = 0, 0.0
     resume = Path(str(out) + ".resume")
-    if resume.is_file():
-        state = torch.load(resume, map_location=device, weights_only=False)
-        if "step_count" not in state.get("ema", {}):
-            raise ValueError(f"{resume}: a resume file of an older tohgs (diffusers' EMA state); delete it to "
-                             "train from the start")
+    key = run_key(name, task, model_cfg, s, data)
+    state = _load_resume(resume, key, device)
+    if state is not None:
         model.load_state_dict(state["model"])
         ema.load_state_dict(state["ema"])
         opt.load_state_dict(state["opt"])
@@ -227,7 +240,7 @@ def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: 
             from tohgs.io import atomic_path
 
             with atomic_path(resume) as tmp:
-                torch.save({"model": model.state_dict(), "ema": ema.state_dict(), "opt": opt.state_dict(),
+                torch.save({"key": key, "model": model.state_dict(), "ema": ema.state_dict(), "opt": opt.state_dict(),
                             "lr_sched": lr_sched.state_dict(), "gen": gen.get_state(),
                             "order_rng": order_rng.bit_generator.state, "step": step, "curve": curve,
                             "spent": spent + time.perf_counter() - t0}, tmp)
@@ -248,13 +261,58 @@ def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: 
     return ckpt
 
 
+def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+    """A checkpoint or resume file as a dict, read with ``weights_only=True``: tensors, numbers, strings and
+    containers only, so a file that carries code is refused and nothing in it runs.
+
+    Raises:
+        ValueError: unreadable, or not made of plain data (the message names the file).
+    """
+    path = Path(path)
+    try:
+        obj = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as exc:
+        raise ValueError(f"{path}: not a readable checkpoint of plain data; refused ({type(exc).__name__}: "
+                         f"{str(exc).splitlines()[0] if str(exc) else ''})") from exc
+    if not isinstance(obj, dict):
+        raise ValueError(f"{path}: not a tohgs checkpoint (a {type(obj).__name__}, not a dict)")
+    return obj
+
+
+_NOT_SHAPING = ("threads", "device", "log_every", "checkpoint_every")  # settings a resumed run may change
+
+
+def run_key(name: str, task: str, model_cfg: dict[str, Any], settings: TrainSettings, data: MapDataset) -> str:
+    """What shapes a training run: the model, the settings that change its steps (not threads, device or
+    logging) and the training data. A resume file of another key is not resumed."""
+    from tohgs.io import content_key
+
+    shaping = {k: v for k, v in asdict(settings).items() if k not in _NOT_SHAPING}
+    arrays = [sh.arrays[k] for sh in data.shards for k in ("grasp", "contact", "points", "d_init", "d_goal")]
+    return content_key(name, task, model_cfg, shaping, *arrays)
+
+
+def _load_resume(resume: Path, key: str, device: torch.device) -> dict[str, Any] | None:
+    """The state of ``resume`` if it exists and belongs to this run (``key``); a file of another run is
+    removed (logged) so that training starts afresh."""
+    if not resume.is_file():
+        return None
+    state = load_checkpoint(resume, map_location=device)
+    if "step_count" not in state.get("ema", {}):
+        raise ValueError(f"{resume}: a resume file of an older tohgs (diffusers' EMA state); delete it to "
+                         "train from the start")
+    if state.get("key") != key:
+        log.warning("%s: written by a run with other settings or data (model, schedule, batch, seed or "
+                    "shards changed); training from the start", resume)
+        resume.unlink()
+        return None
+    return state
+
+
 def load_model(path: str | Path, device: str | torch.device = "cpu"):
     """The model of a checkpoint (EMA weights, eval mode) and the checkpoint dict."""
     path = Path(path)
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as exc:
-        raise ValueError(f"{path}: not a readable checkpoint ({exc})") from exc
+    ckpt = load_checkpoint(path)
     for key in ("name", "model_config", "state_dict"):
         if key not in ckpt:
             raise ValueError(f"{path}: not a tohgs checkpoint (no '{key}')")

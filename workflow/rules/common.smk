@@ -1,6 +1,7 @@
 # Configuration validation, the object selection, wildcard constraints and helper functions.
 import os
 import sys
+from collections import Counter
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -9,7 +10,7 @@ if str(REPO) not in sys.path:  # parse time only; jobs import the installed pack
     sys.path.insert(0, str(REPO))
 
 from tohgs.config import ConfigError, validate_config
-from tohgs.assets.objects import read_catalog
+from tohgs.assets.objects import check_split_sizes, read_catalog
 from tohgs.assets.sources import select_objects, task_set
 
 try:
@@ -17,10 +18,17 @@ try:
 except ConfigError as err:
     raise WorkflowError(f"invalid configuration: {err}") from None
 
+# The task sets the configured tasks draw their targets from (bricks for stacking, objects otherwise).
+TASK_SETS = sorted({task_set(t) for t in config["scenes"]["tasks"]})
+
+SKIPPED_FILES = []  # (file, reason) of user-folder files that cannot be used
 try:
-    OBJECTS = {spec.name: spec for spec in select_objects(config["objects"], config["seed"])}
+    OBJECTS = {spec.name: spec for spec in select_objects(config["objects"], config["seed"], skipped=SKIPPED_FILES)}
+    check_split_sizes(Counter(spec.task_set for spec in OBJECTS.values()), config["objects"]["split"], TASK_SETS)
 except (ValueError, FileNotFoundError) as err:
     raise WorkflowError(f"invalid configuration: {err}") from None
+for _file, _reason in SKIPPED_FILES:
+    print(f"objects.sources.dir: skipped {_file}: {_reason}", file=sys.stderr)
 
 OBJECT_NAME = "(pb|brick|dir)-[a-z0-9-]+"  # the {object} wildcard (see tohgs.assets.sources)
 
@@ -90,11 +98,6 @@ def scene_stores(wildcards):
     return scene_stores_of(wildcards.task)
 
 
-def scene_pool(wildcards):
-    """Obstacles (Placing, Shelving) or base bricks (Stacking) to draw from: the task set's accepted objects."""
-    return accepted_objects(wildcards.task)
-
-
 def scene_settings(wildcards):
     """The scenes settings one task uses (so another task's settings do not make it stale)."""
     keys = ("n_configs", "max_tries", "allow_fewer", "physics", "contact_margin", wildcards.task)
@@ -108,8 +111,8 @@ def prior_stores(wildcards):
 
 
 def plane_direction(wildcards):
-    """Support planes of the synthesis: under a brick (bricks rest upright), any direction for objects."""
-    return "down" if OBJECTS[wildcards.object].source == "bricks" else "random"
+    """Support planes of the synthesis for this object's source (prior_grasps.plane_direction)."""
+    return config["prior_grasps"]["plane_direction"]["bricks" if OBJECTS[wildcards.object].source == "bricks" else "objects"]
 
 
 SPLITS = ("train", "val", "test")

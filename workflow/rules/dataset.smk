@@ -33,7 +33,6 @@ rule maps:
     output:
         directory("results/maps/{task}/{split}/shard-{shard}.zarr"),
     params:
-        objects=split_objects,
         settings=setting("maps", "points"),
         n_shards=lambda w: config["maps"]["shards"][w.split],
         test_configs=setting("maps", "test_configs"),

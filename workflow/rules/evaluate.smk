@@ -26,7 +26,7 @@ rule evaluate:
         objects=object_dirs(),
         supports="results/objects/supports",
         hand="results/hand/hand.npz",
-        code=code("metrics/evaluate", "metrics/quality", "data/predictions", "data/scenes", "grasps/expand",
+        code=code("metrics/evaluate", "metrics/quality", "data/predictions", "data/scenes", "data/store", "grasps/expand",
                   "geometry/raycast", "config"),
     output:
         "results/metrics/{task}/{method}.parquet",
@@ -73,7 +73,8 @@ rule predictions_figure:
         objects=object_dirs(),
         supports="results/objects/supports",
         hand="results/hand/hand.npz",
-        code=code("viz/predictions", "viz/render", "viz/scenes", "sim", "data/predictions", "data/scenes", "data/maps"),
+        code=code("viz/predictions", "viz/render", "viz/scenes", "sim", "data/predictions", "data/scenes", "data/maps",
+                  "data/store"),
     output:
         report("results/figures/predictions_{task}.png", caption="../report/predictions.rst", category="Evaluation"),
     params:
@@ -90,7 +91,7 @@ rule contact_maps_figure:
     input:
         predictions=expand("results/predictions/{task}/ours.zarr", task=config["scenes"]["tasks"]),
         shards=all_test_shards,
-        code=code("viz/predictions", "viz/render", "viz/scenes", "sim", "data/predictions", "data/maps"),
+        code=code("viz/predictions", "viz/render", "viz/scenes", "sim", "data/predictions", "data/maps", "data/store"),
     output:
         report("results/figures/contact_maps.png", caption="../report/contact_maps.rst", category="Evaluation"),
     params:

@@ -7,7 +7,7 @@ rule prior_synthesis:
         object="results/objects/{object}",
         hand="results/hand/hand.npz",
         code=code("grasps/synthesis", "grasps/filter", "grasps/prior", "geometry/sdf", "geometry/raycast",
-                  "metrics/quality", "data/grasps", "config", "runtime"),
+                  "metrics/quality", "data/grasps", "data/store", "config", "runtime"),
     output:
         directory("results/grasps/prior/raw/{object}.zarr"),
     params:
@@ -33,7 +33,7 @@ rule prior_synthesis:
 rule prior_filter:
     input:
         raw="results/grasps/prior/raw/{object}.zarr",
-        code=code("grasps/filter", "data/grasps", "config"),
+        code=code("grasps/filter", "data/grasps", "data/store", "config"),
     output:
         directory("results/grasps/prior/{object}.zarr"),
     params:
@@ -49,7 +49,7 @@ rule prior_filter:
 rule prior_summary:
     input:
         stores=prior_stores,
-        code=code("grasps/filter", "data/grasps"),
+        code=code("grasps/filter", "data/grasps", "data/store"),
     output:
         "results/grasps/prior/summary.csv",
     conda:
@@ -65,7 +65,7 @@ rule prior_figure:
         stores=prior_stores,
         catalog="results/objects/catalog.csv",
         hand="results/hand/hand.npz",
-        code=code("viz/grasps", "viz/render", "data/grasps"),
+        code=code("viz/grasps", "viz/render", "data/grasps", "data/store"),
     output:
         report("results/figures/prior_grasps.png", caption="../report/prior_grasps.rst", category="Prior grasps"),
     params:

@@ -33,6 +33,7 @@ checkpoint catalog:
     params:
         split=setting("objects", "split"),
         seed=setting("seed"),
+        task_sets=TASK_SETS,
     conda:
         "../envs/tohgs.yaml"
     log:

@@ -6,11 +6,10 @@ rule scenes:
     input:
         objects=object_dirs(),
         supports="results/objects/supports",
-        code=code("sim", "data/scenes"),
+        code=code("sim", "data/scenes", "data/store", "assets/sources"),
     output:
         directory("results/scenes/{task}/{object}.zarr"),
     params:
-        pool=scene_pool,
         settings=scene_settings,
         seed=setting("seed"),
     conda:
@@ -27,7 +26,7 @@ rule scenes_figure:
     input:
         scenes=scene_stores,
         supports="results/objects/supports",
-        code=code("viz/scenes", "viz/render", "sim", "data/scenes"),
+        code=code("viz/scenes", "viz/render", "sim", "data/scenes", "data/store"),
     output:
         report("results/figures/scenes_{task}.png", caption="../report/scenes.rst", category="Scenes"),
     params:

@@ -9,6 +9,6 @@ from tohgs.data.build_maps import make_map_shard  # noqa: E402
 from tohgs.hand import HandAssets  # noqa: E402
 
 w, inp, p = snakemake.wildcards, snakemake.input, snakemake.params
-make_map_shard(w.task, w.split, int(w.shard), p.n_shards, p.objects, f"results/scenes/{w.task}",
-               f"results/grasps/task/{w.task}", Path(inp.supports).parent, f"{inp.supports}/supports.json",
+make_map_shard(w.task, w.split, int(w.shard), p.n_shards, inp.scenes, inp.grasps, Path(inp.supports).parent,
+               f"{inp.supports}/supports.json",
                HandAssets.load(inp.hand), p.settings, p.test_configs, p.seed, snakemake.output[0])

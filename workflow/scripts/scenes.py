@@ -5,8 +5,11 @@ from tohgs.io import setup_logging
 
 setup_logging(snakemake.log[0])
 
+from tohgs.assets.sources import accepted_objects, task_set  # noqa: E402
 from tohgs.sim.scenes import make_scene_store  # noqa: E402
 
-make_scene_store(snakemake.wildcards.task, snakemake.wildcards.object, snakemake.params.pool, Path(snakemake.input.supports).parent,
+task = snakemake.wildcards.task
+pool = accepted_objects(snakemake.input.objects, task_set(task))  # obstacles / base bricks to draw from
+make_scene_store(task, snakemake.wildcards.object, pool, Path(snakemake.input.supports).parent,
                  f"{snakemake.input.supports}/supports.json", snakemake.params.settings, snakemake.params.seed,
                  snakemake.output[0])
