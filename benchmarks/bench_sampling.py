@@ -64,7 +64,7 @@ def main() -> None:
             t0 = time.perf_counter()
             with torch.no_grad():
                 gcond = grasp.condition(pts, nrm, cmap)
-            sample(lambda xt, tt: grasp(xt, tt, gcond), (s, 51), grasp.diffusion, sampler, steps, gen)
+            sample(lambda xt, tt: grasp(xt, tt, gcond), (s, grasp.dim), grasp.diffusion, sampler, steps, gen)
             t_grasp += time.perf_counter() - t0
         n = out["configs"] * s
         key = f"{sampler} {steps} steps"

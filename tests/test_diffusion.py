@@ -12,7 +12,7 @@ from torch import nn
 
 from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
 from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, sample, timestep_embedding
-from tohgs.models.grasp_diffuser import GraspDiffuser, GraspDiffuserConfig, grasp_losses, vertex_normals
+from tohgs.models.grasp_diffuser import GraspCondition, GraspDiffuser, GraspDiffuserConfig, grasp_losses, vertex_normals
 from tohgs.models.train import EMA, cosine_with_warmup
 
 SMALL_PN = {"sa": [[32, 0.05, 8, [16, 32]], [8, 0.1, 8, [32, 32]], [0, 0.0, 0, [32, 48]]], "fp": [[32], [32], [32]]}
@@ -200,7 +200,8 @@ def test_vertex_normals_point_out_of_the_closed_hand(hand):
 
 def test_grasp_losses_vanish_for_the_truth_and_grow_with_error(hand):
     torch.manual_seed(0)
-    model = GraspDiffuser(GraspDiffuserConfig(d_model=32, n_blocks=1, pointnet=SMALL_PN))
+    model = GraspDiffuser(GraspDiffuserConfig(d_model=32, n_blocks=1, pointnet=SMALL_PN, frame="network",
+                                              representation="axis_angle"))
     grasp = hand.preset("relaxed", 2)
     model.set_normaliser(torch.cat([grasp, grasp + 0.1]))
     x0 = model.normalise(grasp)
@@ -210,22 +211,109 @@ def test_grasp_losses_vanish_for_the_truth_and_grow_with_error(hand):
     from tohgs.models.grasp_diffuser import contact_values
 
     contact, _ = contact_values(pts, hv, 100.0)
-    exact = grasp_losses(model, hand, x0, x0, pts, contact, 100.0)
-    assert exact["diff"] == 0 and exact["recon"] < 1e-12 and exact["cons"] < 1e-8
+    with torch.no_grad():
+        cond = model.condition(pts, torch.zeros_like(pts), contact)
+    assert torch.equal(cond.points, pts)  # the network frame is the shards' frame
+    exact = grasp_losses(model, hand, x0, x0, cond, contact, 100.0)
+    assert (exact["diff"] == 0).all() and (exact["recon"] < 1e-9).all() and (exact["cons"] < 1e-6).all()
     shifted = grasp.clone()
     shifted[:, :3] += torch.tensor([0.0, -0.01, 0.0])  # the hand moves through the points
-    off = grasp_losses(model, hand, model.normalise(shifted), x0, pts, contact, 100.0)
-    assert off["diff"] > 0 and off["recon"] == pytest.approx(1e-4, rel=1e-3) and off["cons"] > 0
+    off = grasp_losses(model, hand, model.normalise(shifted), x0, cond, contact, 100.0)
+    # L_recon sums the squared vertex error over the vertices (1 cm on each of V vertices: V x 1e-4 m^2).
+    assert (off["diff"] > 0).all() and off["recon"] == pytest.approx(torch.full((2,), hand.n_vertices * 1e-4), rel=1e-3)
+    assert (off["cons"] > 0).all()
     # Points 4 mm outside the true hand are (nearly) all outside it; 1 cm deeper they are inside.
-    assert off["pen"] > 5 * exact["pen"] and off["pen"] > 0.01
+    assert (off["pen"] > 5 * exact["pen"]).all() and (off["pen"] > 0.01).all()
+    # The point sums are scaled to the paper's 2048 points: half the points, the same loss per point.
+    half = GraspCondition(cond.glob, None, cond.rotation, cond.origin, pts[:, ::2])
+    off_half = grasp_losses(model, hand, model.normalise(shifted), x0, half, contact[:, ::2], 100.0)
+    assert off_half["cons"] == pytest.approx(off["cons"], rel=0.3)
+
+
+def test_the_contact_frame_turns_about_z_and_grasps_go_there_and_back(hand):
+    from tohgs.models.grasp_diffuser import contact_frame, grasp_from_frame, grasp_to_frame
+
+    g = torch.Generator().manual_seed(0)
+    pts = torch.randn(3, 64, 3, generator=g) * 0.03
+    contact = (pts[..., 0] > 0.02).float()  # contact on the +x side
+    rot, origin = contact_frame(pts, contact)
+    assert torch.allclose(rot @ rot.transpose(-1, -2), torch.eye(3).expand(3, 3, 3), atol=1e-6)
+    assert torch.allclose(rot[:, :, 2], torch.tensor([0.0, 0.0, 1.0]).expand(3, 3))  # up stays up
+    assert (rot[:, 0, 0] > 0.5).all()  # x towards the contact
+    wrist = hand.rest_joints[0]
+    grasp = hand.preset("relaxed", 3) + torch.cat([0.02 * torch.randn(3, 6, generator=g), torch.zeros(3, 45)], 1)
+    there = grasp_to_frame(grasp, rot, origin, wrist)
+    torch.testing.assert_close(grasp_from_frame(there, rot, origin, wrist), grasp, atol=1e-5, rtol=0)
+    # The hand in the frame is the world hand moved by x' = R^T (x - o).
+    with torch.no_grad():
+        world, local = hand(grasp).vertices, hand(there).vertices
+    torch.testing.assert_close(local, (world - origin[:, None]) @ rot, atol=1e-5, rtol=0)
+    # An upright turn of the input turns the frame with it: the grasp in the frame does not change.
+    a = torch.tensor(0.7)
+    turn = torch.tensor([[a.cos(), -a.sin(), 0.0], [a.sin(), a.cos(), 0.0], [0.0, 0.0, 1.0]])
+    rot2, origin2 = contact_frame(pts @ turn.T, contact)
+    from tohgs.grasps.expand import transform_grasp
+
+    T = np.eye(4)
+    T[:3, :3] = turn.numpy()
+    turned = torch.as_tensor(transform_grasp(grasp.numpy(), T, wrist.numpy()), dtype=torch.float32)
+    torch.testing.assert_close(grasp_to_frame(turned, rot2, origin2, wrist), there, atol=1e-4, rtol=0)
+
+
+def test_the_skip_parameterisation_returns_its_input_at_t_0():
+    model = GraspDiffuser(GraspDiffuserConfig(d_model=16, n_blocks=1, pointnet=SMALL_PN, skip=True))
+    g = torch.Generator().manual_seed(1)
+    pts, nrm = torch.randn(2, 64, 3, generator=g) * 0.03, torch.randn(2, 64, 3, generator=g)
+    contact = torch.rand(2, 64, generator=g)
+    x = torch.randn(2, model.dim, generator=g)
+    with torch.no_grad():
+        cond = model.condition(pts, nrm, contact)
+        out0 = model(x, torch.zeros(2, dtype=torch.long), cond)
+    assert (out0 - x).abs().max() < 0.05  # sqrt(1 - a_0) = 0.01: the residual barely moves it
 
 
 def test_normaliser_of_a_single_grasp_is_finite():
     """A training split with one task grasp (small runs have them) must not give a NaN std."""
-    model = GraspDiffuser(GraspDiffuserConfig(d_model=16, n_blocks=1, pointnet=SMALL_PN))
+    model = GraspDiffuser(GraspDiffuserConfig(d_model=16, n_blocks=1, pointnet=SMALL_PN, representation="axis_angle"))
     grasp = torch.randn(1, 51, generator=torch.Generator().manual_seed(0))
     model.set_normaliser(grasp)
     assert torch.isfinite(model.grasp_std).all() and (model.grasp_std == 1e-3).all()
     assert torch.isfinite(model.normalise(grasp)).all()
     with pytest.raises(ValueError, match="set_normaliser"):
         model.set_normaliser(torch.zeros(0, 51))
+
+
+def test_the_palm_rot6d_representation_round_trips_and_places_the_palm(hand):
+    model = GraspDiffuser(GraspDiffuserConfig(d_model=16, n_blocks=1, pointnet=SMALL_PN, representation="palm_rot6d"))
+    model.set_hand(hand)
+    g = torch.Generator().manual_seed(2)
+    grasp = hand.preset("relaxed", 4) + torch.cat([0.05 * torch.randn(4, 3, generator=g), 1.5 * torch.randn(4, 3, generator=g),
+                                                    torch.zeros(4, 45)], 1)
+    vec = model.vector_of(grasp)
+    assert vec.shape == (4, 54) and model.dim == 54
+    torch.testing.assert_close(hand(model.grasp_of(vec)).vertices, hand(grasp).vertices, atol=1e-5, rtol=0)
+    # the first three numbers are where the rest palm centre goes when the hand is posed
+    flat = torch.cat([grasp[:, :6], torch.zeros(4, 45)], 1)
+    with torch.no_grad():
+        palm = hand(flat).vertices[:, torch.as_tensor(hand.assets.palm_ids)].mean(1)
+    rest_palm = hand.rest_vertices[torch.as_tensor(hand.assets.palm_ids)].mean(0)
+    assert torch.allclose(rest_palm, model.palm)
+    torch.testing.assert_close(vec[:, :3], palm, atol=2e-3, rtol=0)  # flat fingers move the palm vertices a little
+
+
+def test_guidance_needs_an_unconditional_model_and_scale_1_is_the_conditional_one():
+    g = torch.Generator().manual_seed(3)
+    pts, nrm = torch.randn(2, 64, 3, generator=g) * 0.03, torch.randn(2, 64, 3, generator=g)
+    contact = torch.rand(2, 64, generator=g)
+    x, t = torch.randn(2, 54, generator=g), torch.full((2,), 500)
+    plain = GraspDiffuser(GraspDiffuserConfig(d_model=16, n_blocks=1, pointnet=SMALL_PN))
+    with torch.no_grad():
+        cond = plain.condition(pts, nrm, contact)
+        torch.testing.assert_close(plain.guided(x, t, cond, 1.0), plain(x, t, cond))
+        with pytest.raises(ValueError, match="without cond_dropout"):
+            plain.guided(x, t, cond, 2.0)
+        cfg = GraspDiffuser(GraspDiffuserConfig(d_model=16, n_blocks=1, pointnet=SMALL_PN, cond_dropout=0.1))
+        torch.nn.init.normal_(cfg.null_glob, generator=g)
+        cond = cfg.condition(pts, nrm, contact)
+        c, u = cfg(x, t, cond), cfg(x, t, cfg.drop_context(cond, torch.ones(2, dtype=torch.bool)))
+        torch.testing.assert_close(cfg.guided(x, t, cond, 2.0), u + 2.0 * (c - u))

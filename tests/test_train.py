@@ -32,14 +32,15 @@ def trained(built, tmp_path_factory):  # noqa: F811
 
 
 def test_checkpoints_hold_weights_config_normaliser_and_curve(trained):
-    _, _, out, paths = trained
+    _, hand, out, paths = trained
     for name, path in paths.items():
         model, ckpt = load_model(path)
         assert ckpt["name"] == name and ckpt["model_config"] == TINY[name] and len(ckpt["loss_curve"]) == 5
         assert all(np.isfinite(r["loss"]) for r in ckpt["loss_curve"]) and (out / f"{name}.png").stat().st_size > 5000
         assert not path.with_name(path.name + ".resume").exists()
     g, _ = load_model(paths["grasp_diffuser"])
-    assert not torch.allclose(g.grasp_std, torch.ones(51)), "the grasp normaliser is saved"
+    assert not torch.allclose(g.grasp_std, torch.ones(g.dim)), "the grasp normaliser is saved"
+    assert torch.allclose(g.wrist, hand.rest_joints[0]) and g.palm.abs().sum() > 0, "the hand's wrist and palm are saved"
     with pytest.raises(ValueError, match="not a readable checkpoint"):
         load_model(out / "contact_diffuser.png")
 

@@ -7,6 +7,7 @@ or change settings never touch the repository's own results.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import re
 import shutil
@@ -68,6 +69,43 @@ def test_every_training_split_has_task_grasps_with_margin(smoke_run, capsys):
     assert set(train.index) == {"placing", "stacking", "shelving"}
     low = train[train < MIN_TRAIN_GRASPS]
     assert low.empty, f"training splits near the edge of empty (fewer than {MIN_TRAIN_GRASPS} task grasps): {low.to_dict()}"
+
+
+# Conditioning margins of the smoke models (results/models/<task>/checks.json). On the reference machine
+# the trained GraspDiffusers' context gap is 0.31-0.44 and the ContactDiffusers' gap 0.031-0.043; untrained
+# copies of the same networks give 0.004 at most, and the GraspDiffuser of before the conditioning issue
+# (pooled feature only, network frame) gave 0.005 at the default scale (docs/graspdiffuser.md).
+MIN_GRASP_CONTEXT_GAP = 0.08
+MIN_CONTACT_GAP = 0.015
+
+
+def test_the_smoke_models_read_their_condition_and_untrained_copies_do_not(smoke_run):
+    import torch
+
+    from tohgs.data.maps import MapDataset
+    from tohgs.hand import HandAssets, HandModel
+    from tohgs.models.checks import shuffled_condition_gap
+    from tohgs.models.train import build_model, load_model, seen_grasps
+
+    hand = HandModel(HandAssets.load(smoke_run / "results/hand/hand.npz"))
+    for task in ("placing", "stacking", "shelving"):
+        checks = json.loads((smoke_run / f"results/models/{task}/checks.json").read_text())
+        gd, cd = checks["grasp_diffuser"], checks["contact_diffuser"]
+        assert gd["shuffled_condition"]["gap_context"] > MIN_GRASP_CONTEXT_GAP, (task, gd["shuffled_condition"])
+        assert cd["shuffled_condition"]["gap"] > MIN_CONTACT_GAP, (task, cd["shuffled_condition"])
+        assert gd["fit"]["grasps"] > 0 and 0 <= gd["fit"]["touch_rate"] <= 1
+        # The same measurement on an untrained copy fails: the gap is the network's, not the data's.
+        shards = sorted((smoke_run / f"results/maps/{task}/train").glob("shard-*.zarr"))
+        seen = MapDataset(shards, per="grasp", rotation="z", seed=0)
+        torch.manual_seed(0)
+        for name, key, bound in (("grasp_diffuser", "gap_context", MIN_GRASP_CONTEXT_GAP / 4),
+                                 ("contact_diffuser", "gap", MIN_CONTACT_GAP / 2)):
+            _, ckpt = load_model(smoke_run / f"results/models/{task}/{name}.pt")
+            fresh = build_model(name, ckpt["model_config"]).eval()
+            if name == "grasp_diffuser":
+                fresh.set_hand(hand)
+                fresh.set_normaliser(seen_grasps(fresh, seen, torch.device("cpu")))
+            assert abs(shuffled_condition_gap(name, fresh, seen)[key]) < bound, (task, name)
 
 
 def test_smoke_run_outputs(smoke_run):
@@ -213,7 +251,7 @@ def _n_scenes(smoke_run) -> int:
 
 
 N_MAPS = 6  # 3 tasks x (1 train + 1 test) shards in the smoke config (no validation shards)
-MODELS = {"train": 6, "predict": 3}  # 3 tasks x 2 models; 3 tasks x the predicted method (ours)
+MODELS = {"train": 6, "predict": 3, "model_checks": 3}  # 3 tasks x 2 models; 3 tasks x ours; a check per task
 # The evaluation of every task's predictions: 3 tasks x 2 table methods (dataset, ours).
 EVALUATION = {"reference_grasps": 3, "evaluate": 6, "table1": 1, "predictions_figure": 3, "contact_maps_figure": 1}
 
@@ -329,6 +367,7 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
     assert stale_with(("scenes.stacking", stacking)) == {"all": 1, "scenes": n_stacking, "scenes_figure": 1,
                                                          "task_grasps": n_stacking, "maps": _fed_shards(smoke_run, ("stacking",)),
                                                          "dataset_summary": 1, "maps_figure": 1, "train": 2, "predict": 1,
+                                                         "model_checks": 1,
                                                          "reference_grasps": 1, **_evaluated(2, tasks=1),
                                                          "contact_maps_figure": 1}
     # A hand setting concerns the hand only (a MANO file needs a path that exists).
@@ -351,11 +390,13 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
     # A ContactDiffuser size: its three trainings and the predictions that sample from it (not ours-gt-contact);
     # a sampling setting: the predictions only.
     contact = dict(cfg["models"]["contact_diffuser"], d_model=24)
-    assert stale_with(("models.contact_diffuser", contact)) == {"all": 1, "train": 3, "predict": 3, **_evaluated(1)}
+    assert stale_with(("models.contact_diffuser", contact)) == {"all": 1, "train": 3, "predict": 3, "model_checks": 3,
+                                                                **_evaluated(1)}
     assert stale_with(("prediction", dict(cfg["prediction"], steps=4))) == {"all": 1, "predict": 3, **_evaluated(1)}
     # A training setting: that model's trainings, their predictions, their evaluation and the tables.
     grasp = dict(cfg["training"]["grasp_diffuser"], steps=cfg["training"]["grasp_diffuser"]["steps"] + 1)
-    assert stale_with(("training.grasp_diffuser", grasp)) == {"all": 1, "train": 3, "predict": 3, **_evaluated(1)}
+    assert stale_with(("training.grasp_diffuser", grasp)) == {"all": 1, "train": 3, "predict": 3, "model_checks": 3,
+                                                              **_evaluated(1)}
     # A QR threshold or the table's methods: the tables only; an SD setting: the prior grasps and the evaluation.
     assert stale_with(("evaluation.qr", {"max_pv": 2.0e-06, "max_sd": 0.02})) == {"all": 1, "table1": 1}
     assert stale_with(("evaluation.methods", ["ours"])) == {"all": 1, "table1": 1}

@@ -165,9 +165,11 @@ class MapDataset:
     Items are dicts of float32 numpy arrays: ``points`` (N, 3), ``normals`` (N, 3), ``d_init``, ``d_goal``
     (N,), ``goal_transform`` (4, 4, network frame), ``object_id``, ``config_index``, ``shard`` and ``row``
     (ints), plus ``grasp`` (51,) and ``contact`` (N,) per grasp. With ``rotation`` other than ``"none"``
-    the sample is turned about the origin by a random rotation R (``seed`` + index, so an epoch is
-    reproducible): points, normals and the goal transform (``R T R^-1``), and the grasp vector through
-    :func:`tohgs.grasps.expand.transform_grasp` (its translation corrected through the wrist offset).
+    the sample is turned about the origin by a random rotation R: points, normals and the goal transform
+    (``R T R^-1``), and the grasp vector through :func:`tohgs.grasps.expand.transform_grasp` (its
+    translation corrected through the wrist offset). :meth:`item` ``(i, draw)`` draws R from ``(seed, draw,
+    i)``: training passes its step as ``draw``, so every step sees new rotations and a run is still
+    reproducible; ``dataset[i]`` is draw 0.
     """
 
     def __init__(self, paths: list[str | Path], per: str = "grasp", rotation: str = "none", seed: int = 0):
@@ -183,6 +185,10 @@ class MapDataset:
         return len(self.index)
 
     def __getitem__(self, i: int) -> dict[str, Any]:
+        return self.item(i, 0)
+
+    def item(self, i: int, draw: int) -> dict[str, Any]:
+        """Item ``i`` with the augmentation rotation of draw ``draw`` (see the class docstring)."""
         s, row = self.index[i]
         sh = self.shards[s]
         c = int(sh.grasp_config[row]) if self.per == "grasp" else row
@@ -195,7 +201,7 @@ class MapDataset:
             item["grasp"] = sh.grasp[row].astype(np.float32)
             item["contact"] = sh.contact[row]
         if self.rotation != "none":
-            R = random_rotation(np.random.default_rng([self.seed, i]), self.rotation)
+            R = random_rotation(np.random.default_rng([self.seed, int(draw), i]), self.rotation)
             item["points"] = (item["points"] @ R.T).astype(np.float32)
             item["normals"] = (item["normals"] @ R.T).astype(np.float32)
             T = np.eye(4)

@@ -1,18 +1,54 @@
 """GraspDiffuser (paper section 4.3): diffusion over the 51-number grasp, conditioned on the object cloud
 with its (predicted) contact map, with the hand model in the loss.
 
-The grasp (normalised per dimension with the training set's mean and std) is one token; PointNet++ on xyz
-with (normal, contact) gives a global feature, the only context, so attention reduces to an MLP with
-additive conditioning: residual blocks with the condition and the timestep embedding added. The network
-predicts x0. Losses (REFERENCE.md, official code):
+The grasp (normalised per dimension with the training set's mean and std, as the network sees it) is one
+token. The object encoder (``encoder``) is PointNet++ (``"pointnet2"``, the paper's) or a shared
+per-point MLP with a max-pool (``"pointnet"``, the default: about a tenth of the cost and as good here) on
+xyz with (normal, contact). Two ways of reading the condition (``context``):
 
-``L = w_diff L_diff + w_recon min(L_recon, 1) + w_pen min(L_pen, 1) + w_cons L_cons``
+- ``"global"`` (the official model): the pooled feature is the only context, so attention reduces to an
+  MLP with additive conditioning.
+- ``"tokens"`` (the default, as SceneDiffuser and the paper's own description): the same pooled feature
+  plus cross-attention from the grasp token to the per-point features, so the network can read *where*
+  the contact is instead of a summary of it. With ``contact_features`` the contact region's moments
+  (:func:`contact_moments`) are added to the pooled feature.
 
-- ``L_diff``: squared error of the normalised grasp, summed over its 51 numbers, mean over the batch;
-- ``L_recon``: mean squared distance of the predicted hand's vertices to the true hand's, m^2;
+Two frames the grasp is expressed in (``frame``):
+
+- ``"network"``: the map shards' frame (object cloud centred at the origin, z up).
+- ``"contact"``: a frame derived from the contact map itself: the origin at the contact-weighted centroid
+  of the object points and the x axis turned (about z, so up stays up) towards the horizontal direction
+  from the object's centre to that centroid. Points, normals and the grasp are expressed in it, so the
+  network learns the hand's pose *relative to where it touches*, a residual, instead of the absolute pose;
+  an upright rotation of the input does not change what the network sees.
+
+What the network denoises (``representation``): the 51 numbers themselves (``"axis_angle"``, the paper's)
+or ``"palm_rot6d"``: the palm centre's position (3), the global rotation's first two columns (6, the
+continuous 6D representation of Zhou et al.) and the 45 finger numbers. The MANO translation places the
+*wrist*, 8-10 cm from where the hand touches, so it moves with the rotation; the palm centre sits at the
+contact and does not, and an axis-angle jumps where the angle nears pi. The decoder turns the 54 numbers
+back into the 51 (Gram-Schmidt, then the wrist translation).
+
+With ``skip`` (off by default) the network's x0 estimate is ``sqrt(a_t) x_t + sqrt(1 - a_t) F(x_t, t, c)``
+(a_t = alpha-bar), the minimum-variance estimate for unit-variance data plus a learnt residual of unit
+scale: exact at t = 0, where a plain x0 network has to learn the identity (the v-parameterisation,
+``F = -v``). Measured, it made the samples overdispersed (diversity 157 against the data's 104, TS 0.28
+against 0.46 without it; docs/graspdiffuser.md), so the default is the official plain x0 network.
+
+Losses (REFERENCE.md, official code), per sample then averaged over the batch:
+
+``L = w_diff L_diff + w_recon mean_b min(L_recon, 1) + w_pen mean_b min(L_pen, 1) + w_cons mean_b L_cons``
+
+- ``L_diff``: squared error of the normalised vector, summed over its numbers;
+- ``L_recon``: squared distance of the predicted hand's vertices to the true hand's, summed over the
+  vertices (m^2), as the official code;
 - ``L_pen``: object points inside the predicted hand (behind their nearest hand vertex's normal),
-  ``100 sum d^2 (1 + 3 (1 - c)) / B``, d the distance to that vertex (m), c the contact map;
-- ``L_cons``: contact-map consistency ``sum (C'(pred hand) - C(true hand))^2 (1 + 5 C) / B``.
+  ``100 sum d^2 (1 + 3 (1 - c))``, d the distance to that vertex (m), c the contact map;
+- ``L_cons``: contact-map consistency ``sum (C'(pred hand) - C(true hand))^2 (1 + 5 C)``.
+
+The two point sums are scaled to the paper's 2048 points (``sum x (2048 / N)``), so that the paper's weights
+mean the same with any number of training points. The clamps act per sample: a batch with one far-off hand
+keeps the gradient of the others (clamping the batch mean, as the official code, zeroed it for whole runs).
 Weights (15, 1, 5, 0.002) for Placing and Shelving, (10, 1, 3, 0.005) for Stacking.
 """
 
@@ -24,60 +60,238 @@ import torch
 from torch import nn
 
 from tohgs.hand.model import HandModel
-from tohgs.models.diffusion import DiffusionConfig, TimeMLP
-from tohgs.models.pointnet2 import PointNet2, PointNet2Config
+from tohgs.hand.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, TimeMLP
+from tohgs.models.pointnet2 import PointNet, PointNet2, PointNet2Config
 
+GRASP_DIM = 51  # translation (3) + global axis-angle (3) + 15 joints x axis-angle (3)
 LOSS_WEIGHTS = {"placing": (15.0, 1.0, 5.0, 0.002), "shelving": (15.0, 1.0, 5.0, 0.002),
                 "stacking": (10.0, 1.0, 3.0, 0.005)}
+PAPER_POINTS = 2048  # the point sums of L_pen and L_cons are scaled to this many points
+CONTEXTS = ("global", "tokens")
+FRAMES = ("network", "contact")
+ENCODERS = ("pointnet2", "pointnet")
+REPRESENTATIONS = ("axis_angle", "palm_rot6d")
+N_CONTACT_FEATURES = 10  # weighted mean normal (3), second moments of the points (6), log contact mass (1)
 
 
 @dataclass(frozen=True)
 class GraspDiffuserConfig:
-    """Sizes (paper: d_model 512, 4 blocks, PointNet++ global 512). The official model has about 27.7 M
+    """Sizes and the three choices of the module docstring. The official model (``context="global"``,
+    ``frame="network"``, ``skip=False``; d_model 512, 4 blocks, PointNet++ global 512) has about 27.7 M
     parameters; this one at config/paper.yaml's sizes has 8.3 M (its blocks are plain residual MLPs with
     additive conditioning, which is what the official single-token attention reduces to)."""
 
-    d_model: int = 128
+    d_model: int = 64
     n_blocks: int = 3
     ff_mult: int = 2
     dropout: float = 0.0
+    n_heads: int = 4
+    context: str = "tokens"
+    frame: str = "contact"
+    skip: bool = False
+    contact_power: float = 2.0  # the contact frame's weights are c ** contact_power
+    encoder: str = "pointnet"  # or "pointnet2": PointNet++ of sizes ``pointnet`` (the paper's)
+    representation: str = "palm_rot6d"  # or "axis_angle": the 51 numbers (the paper's)
+    contact_features: bool = True  # the contact region's moments added to the pooled condition
+    cond_dropout: float = 0.0  # training: the share of samples whose context is replaced by a learnt null
+    mlp: tuple = (64, 128)
     pointnet: dict = field(default_factory=lambda: {
         "sa": [[128, 0.02, 16, [32, 32, 64]], [32, 0.05, 16, [64, 64, 128]], [0, 0.0, 0, [128, 256]]],
         "fp": [[128], [96], [64]]})
     diffusion: dict = field(default_factory=lambda: asdict(DiffusionConfig(beta_end=0.01, prediction="sample", clip=0.0)))
 
+    def __post_init__(self):
+        if self.context not in CONTEXTS:
+            raise ValueError(f"GraspDiffuser context must be one of {CONTEXTS}, not {self.context!r}")
+        if self.frame not in FRAMES:
+            raise ValueError(f"GraspDiffuser frame must be one of {FRAMES}, not {self.frame!r}")
+        if self.representation not in REPRESENTATIONS:
+            raise ValueError(f"GraspDiffuser representation must be one of {REPRESENTATIONS}, not {self.representation!r}")
+        if self.encoder not in ENCODERS:
+            raise ValueError(f"GraspDiffuser encoder must be one of {ENCODERS}, not {self.encoder!r}")
+        if self.d_model % self.n_heads:
+            raise ValueError(f"GraspDiffuser d_model {self.d_model} is not a multiple of n_heads {self.n_heads}")
+
     @staticmethod
     def from_dict(d: dict) -> "GraspDiffuserConfig":
-        return GraspDiffuserConfig(**d)
+        return GraspDiffuserConfig(**{k: tuple(v) if k == "mlp" else v for k, v in d.items()})
+
+
+@dataclass
+class GraspCondition:
+    """What the network reads of one batch of objects with contact maps (B of them, N points).
+
+    Attributes:
+        glob: (B, d_model) the pooled condition.
+        tokens: (B, N, d_model) per-point tokens, or None (``context="global"``).
+        rotation: (B, 3, 3) the frame's axes in the network frame (columns); identity for ``"network"``.
+        origin: (B, 3) the frame's origin in the network frame, m; zeros for ``"network"``.
+        points: (B, N, 3) the object points in the frame, m (the hand losses compare hands to them).
+    """
+
+    glob: torch.Tensor
+    tokens: torch.Tensor | None
+    rotation: torch.Tensor
+    origin: torch.Tensor
+    points: torch.Tensor
+
+    def expand(self, n: int) -> "GraspCondition":
+        """The condition of one object repeated for ``n`` samples (every field has batch 1)."""
+        return GraspCondition(*(None if v is None else v.expand(n, *v.shape[1:]) for v in
+                                (self.glob, self.tokens, self.rotation, self.origin, self.points)))
+
+
+def contact_frame(points: torch.Tensor, contact: torch.Tensor, power: float = 2.0) -> tuple[torch.Tensor, torch.Tensor]:
+    """The frame a contact map defines on its object cloud.
+
+    Args:
+        points: (B, N, 3) object points (network frame: centred on the object, z up), m.
+        contact: (B, N) contact values in [0, 1] (1 at contact).
+        power: weights are ``contact ** power`` (sharper than the map itself, whose tail is long).
+
+    Returns:
+        ``rotation`` (B, 3, 3), a turn about z (columns: the frame's axes), and ``origin`` (B, 3), the
+        contact-weighted centroid. The x axis points along the centroid's horizontal offset from the
+        cloud's centre (an arbitrary but fixed direction where that offset is under 1 mm); a map without
+        contact gives the cloud's centre and no turn.
+    """
+    w = contact.clamp_min(0) ** power
+    total = w.sum(-1, keepdim=True)
+    centre = points.mean(1)
+    origin = torch.where(total > 1e-6, (w[..., None] * points).sum(1) / total.clamp_min(1e-6), centre)
+    off = origin[:, :2] - centre[:, :2]
+    norm = off.norm(dim=-1, keepdim=True)
+    direction = torch.where(norm > 1e-3, off / norm.clamp_min(1e-12), torch.tensor([1.0, 0.0], dtype=points.dtype,
+                                                                                      device=points.device))
+    c, s = direction[:, 0], direction[:, 1]
+    zero, one = torch.zeros_like(c), torch.ones_like(c)
+    rotation = torch.stack([torch.stack([c, -s, zero], -1), torch.stack([s, c, zero], -1),
+                            torch.stack([zero, zero, one], -1)], -2)
+    return rotation, origin
+
+
+def contact_moments(points: torch.Tensor, normals: torch.Tensor, contact: torch.Tensor, power: float = 2.0
+                    ) -> torch.Tensor:
+    """(B, 10) the contact region in numbers: its weighted mean normal (3), the weighted second moments of
+    its points about their centroid (xx, yy, zz, xy, xz, yz, in cm^2), and the log of its total weight
+    (weights ``contact ** power``; points (B, N, 3) m, normals (B, N, 3), contact (B, N))."""
+    w = contact.clamp_min(0) ** power
+    total = w.sum(-1, keepdim=True).clamp_min(1e-6)
+    wn = w / total
+    mean_normal = (wn[..., None] * normals).sum(1)
+    centred = (points - (wn[..., None] * points).sum(1, keepdim=True)) * 100.0  # cm
+    xx, yy, zz = [(wn * centred[..., k] ** 2).sum(-1) for k in range(3)]
+    xy, xz, yz = [(wn * centred[..., i] * centred[..., j]).sum(-1) for i, j in ((0, 1), (0, 2), (1, 2))]
+    return torch.cat([mean_normal, torch.stack([xx, yy, zz, xy, xz, yz], -1), total.log()], -1)
+
+
+def grasp_to_frame(grasp: torch.Tensor, rotation: torch.Tensor, origin: torch.Tensor, wrist: torch.Tensor) -> torch.Tensor:
+    """(B, 51) grasps of the network frame expressed in frames (rotation (B, 3, 3), origin (B, 3)).
+
+    The hand model turns its global rotation about the rest wrist ``wrist`` (3,) and then translates by t
+    (:func:`tohgs.grasps.expand.transform_grasp`), so in a frame ``x' = R^T (x - o)`` the rotation is
+    ``R^T R_g`` and the translation ``R^T (j0 + t - o) - j0``; the finger numbers do not change.
+    """
+    rt = rotation.transpose(-1, -2)
+    rot = matrix_to_axis_angle(rt @ axis_angle_to_matrix(grasp[:, 3:6]))
+    trans = (rt @ (wrist + grasp[:, :3] - origin)[..., None])[..., 0] - wrist
+    return torch.cat([trans, rot, grasp[:, 6:]], -1)
+
+
+def grasp_from_frame(grasp: torch.Tensor, rotation: torch.Tensor, origin: torch.Tensor, wrist: torch.Tensor) -> torch.Tensor:
+    """The inverse of :func:`grasp_to_frame`: (B, 51) grasps of the frames back in the network frame."""
+    rot = matrix_to_axis_angle(rotation @ axis_angle_to_matrix(grasp[:, 3:6]))
+    trans = (rotation @ (wrist + grasp[:, :3])[..., None])[..., 0] + origin - wrist
+    return torch.cat([trans, rot, grasp[:, 6:]], -1)
+
+
+class _Block(nn.Module):
+    """A residual MLP with the additive condition, then (with tokens) cross-attention to the object."""
+
+    def __init__(self, d: int, mult: int, dropout: float, heads: int, tokens: bool):
+        super().__init__()
+        self.mlp = nn.Sequential(nn.LayerNorm(d), nn.Linear(d, mult * d), nn.GELU(), nn.Dropout(dropout),
+                                 nn.Linear(mult * d, d))
+        self.attn = nn.MultiheadAttention(d, heads, dropout=dropout, batch_first=True) if tokens else None
+        self.norm = nn.LayerNorm(d) if tokens else None
+
+    def forward(self, h: torch.Tensor, c: torch.Tensor, tokens: torch.Tensor | None) -> torch.Tensor:
+        h = h + self.mlp(h + c)
+        if self.attn is not None:
+            q = self.norm(h)[:, None]  # (B, 1, d): the grasp token asks the object tokens
+            h = h + self.attn(q, tokens, tokens, need_weights=False)[0][:, 0]
+        return h
 
 
 class GraspDiffuser(nn.Module):
-    """x0-prediction network over normalised grasps; holds the grasp normaliser as buffers."""
+    """x0-prediction network over normalised grasps; holds the grasp normaliser and the hand's rest wrist
+    as buffers (both set from the training data)."""
 
     def __init__(self, cfg: GraspDiffuserConfig):
         super().__init__()
         self.cfg = cfg
         self.diffusion = DiffusionConfig(**cfg.diffusion)
-        self.backbone = PointNet2(PointNet2Config.from_dict({**cfg.pointnet, "in_channels": 4}))
+        if cfg.encoder == "pointnet2":
+            self.backbone = PointNet2(PointNet2Config.from_dict({**cfg.pointnet, "in_channels": 4}))
+        else:
+            self.backbone = PointNet(4, list(cfg.mlp))
         d = cfg.d_model
         self.cond = nn.Sequential(nn.Linear(self.backbone.global_dim, d), nn.SiLU(), nn.Linear(d, d))
+        tokens = cfg.context == "tokens"
+        self.token_proj = (nn.Sequential(nn.Linear(self.backbone.local_dim + 4, d), nn.SiLU(), nn.Linear(d, d))
+                           if tokens else None)
         self.time = TimeMLP(d)
-        self.inp = nn.Linear(51, d)
-        self.blocks = nn.ModuleList([nn.Sequential(nn.LayerNorm(d), nn.Linear(d, cfg.ff_mult * d), nn.GELU(),
-                                                   nn.Dropout(cfg.dropout), nn.Linear(cfg.ff_mult * d, d))
-                                     for _ in range(cfg.n_blocks)])
-        self.out = nn.Sequential(nn.LayerNorm(d), nn.Linear(d, 51))
-        self.register_buffer("grasp_mean", torch.zeros(51))
-        self.register_buffer("grasp_std", torch.ones(51))
+        self.dim = GRASP_DIM if cfg.representation == "axis_angle" else GRASP_DIM + 3
+        self.features = (nn.Sequential(nn.Linear(N_CONTACT_FEATURES, d), nn.SiLU(), nn.Linear(d, d))
+                         if cfg.contact_features else None)
+        self.inp = nn.Linear(self.dim, d)
+        self.blocks = nn.ModuleList([_Block(d, cfg.ff_mult, cfg.dropout, cfg.n_heads, tokens) for _ in range(cfg.n_blocks)])
+        self.out = nn.Sequential(nn.LayerNorm(d), nn.Linear(d, self.dim))
+        if cfg.cond_dropout > 0:  # classifier-free guidance: a learnt "no context" for the unconditional model
+            self.null_glob = nn.Parameter(torch.zeros(d))
+            self.null_tokens = nn.Parameter(torch.zeros(d)) if tokens else None
+        self.register_buffer("grasp_mean", torch.zeros(self.dim))
+        self.register_buffer("grasp_std", torch.ones(self.dim))
+        self.register_buffer("wrist", torch.zeros(3))
+        self.register_buffer("palm", torch.zeros(3))
+        self.register_buffer("alphas_cumprod", NoiseSchedule(self.diffusion).alphas_cumprod.clone(), persistent=False)
 
     def set_normaliser(self, grasps: torch.Tensor) -> None:
-        """Per-dimension mean and std of (G, 51) training grasps (std floored at 1e-3; a single grasp has
-        no spread, so its std is that floor, where the unbiased std would be NaN and poison training)."""
-        if grasps.ndim != 2 or grasps.shape[0] == 0:
-            raise ValueError(f"set_normaliser needs (G >= 1, 51) grasps, got {tuple(grasps.shape)}")
+        """Per-dimension mean and std of (G, D) training vectors *as the network sees them* (in its frame,
+        after augmentation, in its representation: :meth:`in_frame`); std floored at 1e-3 (a single grasp
+        has no spread, so its std is that floor, where the unbiased std would be NaN and poison training)."""
+        if grasps.ndim != 2 or grasps.shape[0] == 0 or grasps.shape[1] != self.dim:
+            raise ValueError(f"set_normaliser needs (G >= 1, {self.dim}) vectors, got {tuple(grasps.shape)}")
         self.grasp_mean.copy_(grasps.mean(0))
         std = grasps.std(0) if grasps.shape[0] > 1 else torch.zeros_like(grasps[0])
         self.grasp_std.copy_(std.clamp_min(1e-3))
+
+    def set_hand(self, hand: HandModel) -> None:
+        """The hand's rest wrist joint (grasps turn about it: the contact frame needs it) and its rest palm
+        centre (the mean of its palm vertices; ``palm_rot6d`` places it), m."""
+        self.wrist.copy_(hand.rest_joints[0].to(self.wrist))
+        self.palm.copy_(hand.rest_vertices[torch.as_tensor(hand.assets.palm_ids)].mean(0).to(self.palm))
+
+    def vector_of(self, grasp: torch.Tensor) -> torch.Tensor:
+        """(B, 51) grasps -> (B, D) vectors of the representation (unnormalised)."""
+        if self.cfg.representation == "axis_angle":
+            return grasp
+        rot = axis_angle_to_matrix(grasp[:, 3:6])
+        palm = grasp[:, :3] + self.wrist + (rot @ (self.palm - self.wrist)[:, None])[..., 0]
+        return torch.cat([palm, rot[..., 0], rot[..., 1], grasp[:, 6:]], -1)
+
+    def grasp_of(self, vec: torch.Tensor) -> torch.Tensor:
+        """The inverse of :meth:`vector_of` (any 6D vector is projected onto a rotation, Gram-Schmidt)."""
+        if self.cfg.representation == "axis_angle":
+            return vec
+        a, b = vec[:, 3:6], vec[:, 6:9]
+        x = a / a.norm(dim=-1, keepdim=True).clamp_min(1e-8)
+        y = b - (x * b).sum(-1, keepdim=True) * x
+        y = y / y.norm(dim=-1, keepdim=True).clamp_min(1e-8)
+        rot = torch.stack([x, y, torch.cross(x, y, dim=-1)], -1)
+        trans = vec[:, :3] - self.wrist - (rot @ (self.palm - self.wrist)[:, None])[..., 0]
+        return torch.cat([trans, matrix_to_axis_angle(rot), vec[:, 9:]], -1)
 
     def normalise(self, g: torch.Tensor) -> torch.Tensor:
         return (g - self.grasp_mean) / self.grasp_std
@@ -85,18 +299,85 @@ class GraspDiffuser(nn.Module):
     def denormalise(self, x: torch.Tensor) -> torch.Tensor:
         return x * self.grasp_std + self.grasp_mean
 
-    def condition(self, points: torch.Tensor, normals: torch.Tensor, contact: torch.Tensor) -> torch.Tensor:
-        """(B, d_model) conditioning from the object cloud and its contact map."""
-        _, glob = self.backbone(points, torch.cat([normals, contact[..., None]], -1))
-        return self.cond(glob)
+    def frame_of(self, points: torch.Tensor, contact: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(rotation (B, 3, 3), origin (B, 3))`` of the network's frame for (B, N, 3) points with their
+        (B, N) contact map: :func:`contact_frame`, or the identity for ``frame="network"``."""
+        if self.cfg.frame == "contact":
+            return contact_frame(points, contact, self.cfg.contact_power)
+        b = points.shape[0]
+        return (torch.eye(3, dtype=points.dtype, device=points.device).expand(b, 3, 3),
+                torch.zeros(b, 3, dtype=points.dtype, device=points.device))
 
-    def forward(self, x_t: torch.Tensor, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
-        """Predict the normalised grasp x0 (B, 51) from ``x_t`` (B, 51), timesteps (B,) and the condition."""
-        c = cond + self.time(t)
+    def in_frame(self, grasp: torch.Tensor, points: torch.Tensor, contact: torch.Tensor) -> torch.Tensor:
+        """(B, 51) network-frame grasps as (B, D) unnormalised vectors in the network's frame (what the
+        normaliser measures)."""
+        rot, origin = self.frame_of(points, contact)
+        if self.cfg.frame == "contact":
+            grasp = grasp_to_frame(grasp, rot, origin, self.wrist)
+        return self.vector_of(grasp)
+
+    def condition(self, points: torch.Tensor, normals: torch.Tensor, contact: torch.Tensor) -> GraspCondition:
+        """The condition of (B, N, 3) points with (B, N, 3) normals and their (B, N) contact map."""
+        rot, origin = self.frame_of(points, contact)
+        points = (points - origin[:, None]) @ rot  # x' = R^T (x - o), as row vectors
+        normals = normals @ rot
+        local, glob = self.backbone(points, torch.cat([normals, contact[..., None]], -1))
+        tokens = None
+        if self.token_proj is not None:
+            tokens = self.token_proj(torch.cat([local, points, contact[..., None]], -1))
+        c = self.cond(glob)
+        if self.features is not None:
+            c = c + self.features(contact_moments(points, normals, contact, self.cfg.contact_power))
+        return GraspCondition(c, tokens, rot, origin, points)
+
+    def encode(self, grasp: torch.Tensor, cond: GraspCondition) -> torch.Tensor:
+        """(B, 51) network-frame grasps -> the (B, D) normalised vectors the network denoises (its frame)."""
+        if self.cfg.frame == "contact":
+            grasp = grasp_to_frame(grasp, cond.rotation, cond.origin, self.wrist)
+        return self.normalise(self.vector_of(grasp))
+
+    def in_frame_grasp(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, D) normalised vectors -> (B, 51) grasps in the network's frame (the hand losses pose them)."""
+        return self.grasp_of(self.denormalise(x))
+
+    def decode(self, x: torch.Tensor, cond: GraspCondition) -> torch.Tensor:
+        """The inverse of :meth:`encode`: (B, D) normalised vectors -> network-frame grasps (B, 51)."""
+        grasp = self.in_frame_grasp(x)
+        if self.cfg.frame == "contact":
+            grasp = grasp_from_frame(grasp, cond.rotation, cond.origin, self.wrist)
+        return grasp
+
+    def drop_context(self, cond: GraspCondition, drop: torch.Tensor) -> GraspCondition:
+        """The condition with the context of the samples where (B,) bool ``drop`` replaced by the learnt
+        null (the frame stays: it is a function of the map, not something the network reads)."""
+        if self.cfg.cond_dropout <= 0:
+            raise ValueError("this GraspDiffuser was trained without cond_dropout: it has no unconditional model")
+        glob = torch.where(drop[:, None], self.null_glob.expand_as(cond.glob), cond.glob)
+        tokens = cond.tokens
+        if tokens is not None:
+            tokens = torch.where(drop[:, None, None], self.null_tokens.expand_as(tokens), tokens)
+        return GraspCondition(glob, tokens, cond.rotation, cond.origin, cond.points)
+
+    def guided(self, x_t: torch.Tensor, t: torch.Tensor, cond: GraspCondition, scale: float) -> torch.Tensor:
+        """Classifier-free guidance: ``u + scale (c - u)`` of the conditional and unconditional x0 estimates
+        (``scale`` 1 is the conditional model alone)."""
+        c = self(x_t, t, cond)
+        if scale == 1.0:
+            return c
+        u = self(x_t, t, self.drop_context(cond, torch.ones(x_t.shape[0], dtype=torch.bool, device=x_t.device)))
+        return u + scale * (c - u)
+
+    def forward(self, x_t: torch.Tensor, t: torch.Tensor, cond: GraspCondition) -> torch.Tensor:
+        """Predict the normalised vector x0 (B, D) from ``x_t`` (B, D), timesteps (B,) and the condition."""
+        c = cond.glob + self.time(t)
         h = self.inp(x_t)
         for block in self.blocks:
-            h = h + block(h + c)
-        return self.out(h)
+            h = block(h, c, cond.tokens)
+        out = self.out(h)
+        if self.cfg.skip:
+            a = self.alphas_cumprod.to(x_t.device)[t][:, None]
+            out = a.sqrt() * x_t + (1 - a).sqrt() * out
+        return out
 
 
 def vertex_normals(verts: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
@@ -110,35 +391,50 @@ def vertex_normals(verts: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
 
 
 def contact_values(points: torch.Tensor, hand_verts: torch.Tensor, alpha: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """Normalised contact map (B, N) of points (B, N, 3) to hands (B, V, 3) and the nearest vertex (B, N)."""
-    d = torch.cdist(points, hand_verts)
-    dmin, idx = d.min(-1)
+    """Normalised contact map (B, N) of points (B, N, 3) to hands (B, V, 3) and the nearest vertex (B, N).
+
+    The nearest vertex is found without gradient and the distance recomputed to it alone: the same values
+    and gradients as the minimum over all distances (whose gradient reaches only the nearest vertex), at a
+    fraction of the cost (the backward pass of the full B x N x V distance matrix was two thirds of a
+    training step)."""
+    with torch.no_grad():
+        idx = torch.cdist(points, hand_verts).argmin(-1)
+    near = torch.gather(hand_verts, 1, idx[..., None].expand(-1, -1, 3))
+    dmin = ((points - near) ** 2).sum(-1).add(1e-12).sqrt()
     return 1.0 - 2.0 * (torch.sigmoid(alpha * dmin) - 0.5), idx
 
 
-def grasp_losses(model: GraspDiffuser, hand: HandModel, x0_hat: torch.Tensor, x0: torch.Tensor, points: torch.Tensor,
+def grasp_losses(model: GraspDiffuser, hand: HandModel, x0_hat: torch.Tensor, x0: torch.Tensor, cond: GraspCondition,
                  contact: torch.Tensor, alpha_contact: float) -> dict[str, torch.Tensor]:
-    """The four loss terms (unweighted, unclamped) of predicted normalised grasps ``x0_hat`` (B, 51) against
-    the truth ``x0``, on object points (B, N, 3) with their true contact map (B, N)."""
-    b = x0.shape[0]
-    l_diff = ((x0_hat - x0) ** 2).sum(-1).mean()
-    pred_v = hand(model.denormalise(x0_hat)).vertices
+    """The four loss terms per sample (unweighted, unclamped; each (B,)) of predicted normalised vectors
+    ``x0_hat`` (B, D) against the truth ``x0``, on the condition's object points (B, N, 3, in the
+    network's frame) with their true contact map (B, N)."""
+    points = cond.points
+    scale = PAPER_POINTS / points.shape[1]
+    l_diff = ((x0_hat - x0) ** 2).sum(-1)
+    pred_v = hand(model.in_frame_grasp(x0_hat)).vertices
     with torch.no_grad():
-        true_v = hand(model.denormalise(x0)).vertices
-    l_recon = ((pred_v - true_v) ** 2).sum(-1).mean()
+        true_v = hand(model.in_frame_grasp(x0)).vertices
+    l_recon = ((pred_v - true_v) ** 2).sum((-1, -2))
     c_pred, idx = contact_values(points, pred_v, alpha_contact)
     nv = vertex_normals(pred_v, hand.closed_faces)
     near = torch.gather(pred_v, 1, idx[..., None].expand(-1, -1, 3))
     near_n = torch.gather(nv, 1, idx[..., None].expand(-1, -1, 3))
     offset = points - near
     inside = ((offset * near_n).sum(-1) < 0).float()
-    l_pen = 100.0 * (inside * (offset**2).sum(-1) * (1 + 3 * (1 - contact))).sum() / b
-    l_cons = ((c_pred - contact) ** 2 * (1 + 5 * contact)).sum() / b
+    l_pen = 100.0 * scale * (inside * (offset**2).sum(-1) * (1 + 3 * (1 - contact))).sum(-1)
+    l_cons = scale * ((c_pred - contact) ** 2 * (1 + 5 * contact)).sum(-1)
     return {"diff": l_diff, "recon": l_recon, "pen": l_pen, "cons": l_cons}
 
 
-def total_loss(terms: dict[str, torch.Tensor], weights: tuple[float, float, float, float]) -> torch.Tensor:
-    """``w_diff L_diff + w_recon min(L_recon, 1) + w_pen min(L_pen, 1) + w_cons L_cons``."""
+def weighted_terms(terms: dict[str, torch.Tensor], weights: tuple[float, float, float, float]) -> dict[str, torch.Tensor]:
+    """Each term's contribution to the loss (scalars): ``w_diff mean L_diff``, ``w_recon mean min(L_recon, 1)``,
+    ``w_pen mean min(L_pen, 1)``, ``w_cons mean L_cons`` (clamps per sample)."""
     w_diff, w_recon, w_pen, w_cons = weights
-    return (w_diff * terms["diff"] + w_recon * terms["recon"].clamp(max=1.0) + w_pen * terms["pen"].clamp(max=1.0)
-            + w_cons * terms["cons"])
+    return {"diff": w_diff * terms["diff"].mean(), "recon": w_recon * terms["recon"].clamp(max=1.0).mean(),
+            "pen": w_pen * terms["pen"].clamp(max=1.0).mean(), "cons": w_cons * terms["cons"].mean()}
+
+
+def total_loss(terms: dict[str, torch.Tensor], weights: tuple[float, float, float, float]) -> torch.Tensor:
+    """The sum of :func:`weighted_terms`."""
+    return sum(weighted_terms(terms, weights).values())

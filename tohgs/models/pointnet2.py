@@ -165,3 +165,19 @@ class PointNet2(nn.Module):
             fine = len(self.sa) - 1 - level
             f = fp(xyzs[fine], xyzs[fine + 1], fs[fine], f)
         return f, global_feat
+
+
+class PointNet(nn.Module):
+    """PointNet without grouping: a shared per-point MLP and a max-pool, the cheap encoder (about a tenth
+    of PointNet++'s multiply-adds at the default sizes). Returns per-point features (B, N, mlp[-1]) and the
+    pooled feature (B, mlp[-1]) of (B, N, 3) points with (B, N, in_channels) features, as
+    :class:`PointNet2` does."""
+
+    def __init__(self, in_channels: int, mlp: list[int]):
+        super().__init__()
+        self.mlp = _mlp([in_channels + 3, *mlp])
+        self.local_dim = self.global_dim = mlp[-1]
+
+    def forward(self, xyz: torch.Tensor, feats: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        local = self.mlp(torch.cat([xyz, feats], -1))
+        return local, local.max(1).values

@@ -28,7 +28,7 @@ log = logging.getLogger(__name__)
 @dataclass(frozen=True)
 class PredictSettings:
     """``samples`` S per configuration (the paper's 16); sampler ``ddpm`` (all T steps) or ``ddim`` with
-    ``steps`` steps; ``seed``; ``device``."""
+    ``steps`` steps; ``seed``; ``device``; GraspDiffuser's classifier-free ``guidance`` scale."""
 
     samples: int = 16
     sampler: str = "ddim"
@@ -36,6 +36,7 @@ class PredictSettings:
     seed: int = 0
     threads: int = 1
     device: str = "auto"
+    guidance: float = 1.0  # GraspDiffuser's classifier-free guidance scale (1: none; needs cond_dropout)
 
 
 def _gt_contacts(shard, c: int, n: int) -> np.ndarray | None:
@@ -111,10 +112,10 @@ def predict(task: str, method: str, test_shards: list[str | Path], grasp_ckpt: s
         cmap = torch.as_tensor(contact, dtype=torch.float32, device=device)
         with torch.no_grad():
             gcond = grasp_model.condition(pts, nrm, cmap)
-        x0 = sample(lambda xt, tt: grasp_model(xt, tt, gcond), (s.samples, 51), grasp_model.diffusion, s.sampler, s.steps,
+        x0 = sample(lambda xt, tt: grasp_model.guided(xt, tt, gcond, s.guidance), (s.samples, grasp_model.dim), grasp_model.diffusion, s.sampler, s.steps,
                     gen, device)
         with torch.no_grad():
-            local = grasp_model.denormalise(x0).cpu().numpy().astype(np.float64)
+            local = grasp_model.decode(x0, gcond).cpu().numpy().astype(np.float64)
         t_grasp += time.perf_counter() - t0
         world = local.copy()
         world[:, :3] += shard.centroid[c]

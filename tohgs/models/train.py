@@ -24,7 +24,7 @@ from tohgs.data.maps import MapDataset
 from tohgs.hand.model import HandModel
 from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
 from tohgs.models.diffusion import NoiseSchedule
-from tohgs.models.grasp_diffuser import LOSS_WEIGHTS, GraspDiffuser, GraspDiffuserConfig, grasp_losses, total_loss
+from tohgs.models.grasp_diffuser import LOSS_WEIGHTS, GraspDiffuser, GraspDiffuserConfig, grasp_losses, weighted_terms
 
 log = logging.getLogger(__name__)
 MODELS = ("contact_diffuser", "grasp_diffuser")
@@ -42,7 +42,7 @@ class TrainSettings:
     weight_decay: float = 1e-5
     warmup: int = 50
     ema_decay: float = 0.999
-    rotation: str = "so3"
+    rotation: str = "z"
     checkpoint_every: int = 200
     log_every: int = 50
     seed: int = 0
@@ -144,6 +144,34 @@ def _collate(items: list[dict[str, Any]], device: torch.device, keep: np.ndarray
     return out
 
 
+def seen_grasps(model: GraspDiffuser, data: MapDataset, device: torch.device, min_samples: int = 4096,
+                max_draws: int = 8) -> torch.Tensor:
+    """(G', D) the training grasps as the network sees them: augmented as in training (draws 0, 1, ...
+    of every item, until ``min_samples`` or ``max_draws``) and in the network's frame. The normaliser is
+    computed on these, not on the stored grasps, whose rotation the augmentation changes."""
+    draws = 1 if data.rotation == "none" else min(max_draws, max(1, -(-min_samples // len(data))))
+    out = []
+    with torch.no_grad():
+        for draw in range(draws):
+            items = [data.item(i, draw) for i in range(len(data))]
+            for k in range(0, len(items), 256):
+                chunk = _collate(items[k:k + 256], device)
+                out.append(model.in_frame(chunk["grasp"], chunk["points"], chunk["contact"]))
+    return torch.cat(out)
+
+
+def gradient_shares(model: torch.nn.Module, losses: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """The gradient norm of each weighted loss term (``w_<term>``) over the model's parameters, as
+    ``grad_<term>``: how much each term pulls, where the loss values alone do not say (a clamped term has
+    a value and no gradient)."""
+    params = [p for p in model.parameters() if p.requires_grad]
+    out = {}
+    for k in [k for k in losses if k.startswith("w_")]:
+        grads = torch.autograd.grad(losses[k], params, retain_graph=True, allow_unused=True)
+        out[f"grad_{k[2:]}"] = torch.sqrt(sum((g.detach() ** 2).sum() for g in grads if g is not None))
+    return out
+
+
 def training_step(name: str, model, batch: dict[str, torch.Tensor], sched: NoiseSchedule, generator: torch.Generator,
                   hand: HandModel | None, weights: tuple[float, float, float, float], alpha_contact: float
                   ) -> dict[str, torch.Tensor]:
@@ -158,13 +186,19 @@ def training_step(name: str, model, batch: dict[str, torch.Tensor], sched: Noise
         cond = model.condition(batch["points"], batch["normals"], batch["d_init"], batch["d_goal"])
         loss = torch.nn.functional.mse_loss(model(x_t, t, cond), noise)
         return {"loss": loss}
-    x0 = model.normalise(batch["grasp"])
+    cond = model.condition(batch["points"], batch["normals"], batch["contact"])
+    x0 = model.encode(batch["grasp"], cond)
     noise = torch.randn(x0.shape, generator=generator).to(dev)
     x_t = sched.q_sample(x0, noise, t)
-    cond = model.condition(batch["points"], batch["normals"], batch["contact"])
-    x0_hat = model(x_t, t, cond)
-    terms = grasp_losses(model, hand, x0_hat, x0, batch["points"], batch["contact"], alpha_contact)
-    return {"loss": total_loss(terms, weights), **terms}
+    if model.cfg.cond_dropout > 0:
+        drop = (torch.rand(b, generator=generator) < model.cfg.cond_dropout).to(dev)
+        x0_hat = model(x_t, t, model.drop_context(cond, drop))
+    else:
+        x0_hat = model(x_t, t, cond)
+    terms = grasp_losses(model, hand, x0_hat, x0, cond, batch["contact"], alpha_contact)
+    weighted = weighted_terms(terms, weights)
+    return {"loss": sum(weighted.values()), **{k: v.mean() for k, v in terms.items()},
+            **{f"w_{k}": v for k, v in weighted.items()}}
 
 
 def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: dict[str, Any], settings: dict[str, Any],
@@ -186,7 +220,8 @@ def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: 
         if hand is None:
             raise ValueError("GraspDiffuser trains with the hand model in the loss; pass hand=")
         hand = hand.to(device)
-        model.set_normaliser(torch.as_tensor(np.concatenate([sh.grasp for sh in data.shards]), device=device))
+        model.set_hand(hand)
+        model.set_normaliser(seen_grasps(model, data, device))
     sched = NoiseSchedule(model.diffusion)
     opt = torch.optim.AdamW(model.parameters(), lr=s.lr, betas=s.betas, weight_decay=s.weight_decay)
     lr_sched = cosine_with_warmup(opt, s.warmup, s.steps)
@@ -212,15 +247,17 @@ def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: 
     log.info("%s/%s: %d parameters, %d training grasps, %d steps of batch %d on %s", task, name, n_params, len(data),
              s.steps, s.batch, device)
     t0 = time.perf_counter()
-    running: dict[str, float] = {}
+    running: dict[str, tuple[float, int]] = {}  # sum and count of each logged value since the last row
     model.train()
     while step < s.steps:
         idx = order_rng.integers(0, len(data), s.batch)
         n_pts = data.shards[0].points.shape[1]
         keep = order_rng.permutation(n_pts)[: s.train_points] if 0 < s.train_points < n_pts else None
-        batch = _collate([data[int(i)] for i in idx], device, keep)
+        batch = _collate([data.item(int(i), step) for i in idx], device, keep)
         losses = training_step(name, model, batch, sched, gen, hand, weights, alpha_contact)
         opt.zero_grad(set_to_none=True)
+        if (step + 1) % s.log_every == 0 and any(k.startswith("w_") for k in losses):
+            losses.update(gradient_shares(model, losses))
         losses["loss"].backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
         opt.step()
@@ -228,10 +265,10 @@ def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: 
         ema.step(model.parameters())
         step += 1
         for k, v in losses.items():
-            running[k] = running.get(k, 0.0) + float(v.detach())
+            total, count = running.get(k, (0.0, 0))
+            running[k] = (total + float(v.detach()), count + 1)
         if step % s.log_every == 0 or step == s.steps:
-            n = s.log_every if step % s.log_every == 0 else step % s.log_every
-            row = {"step": step, **{k: v / n for k, v in running.items()}, "lr": lr_sched.get_last_lr()[0]}
+            row = {"step": step, **{k: total / count for k, (total, count) in running.items()}, "lr": lr_sched.get_last_lr()[0]}
             curve.append(row)
             running = {}
             log.info("%s/%s step %d/%d: %s", task, name, step, s.steps,
@@ -322,7 +359,8 @@ def load_model(path: str | Path, device: str | torch.device = "cpu"):
 
 
 def plot_curve(curve: list[dict[str, float]], title: str, out_png: str | Path) -> None:
-    """Training loss curve (and the grasp loss terms) as a PNG."""
+    """Training curves as a PNG: the loss and each weighted term's contribution to it (``w_*``), and,
+    where logged, each term's gradient norm (``grad_*``: what each term pulls, a clamped term none)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -330,15 +368,28 @@ def plot_curve(curve: list[dict[str, float]], title: str, out_png: str | Path) -
 
     from tohgs.io import atomic_path
 
-    fig, ax = plt.subplots(figsize=(6, 3.5))
+    keys = [k for k in (curve[0] if curve else {}) if k not in ("step", "lr")]
+    grads = [k for k in {k for r in curve for k in r} if k.startswith("grad_")]
+    values = [k for k in keys if k == "loss" or k.startswith("w_")] or [k for k in keys if not k.startswith("grad_")]
+    fig, axes = plt.subplots(1, 2 if grads else 1, figsize=(11 if grads else 6, 3.5), squeeze=False)
     steps = [r["step"] for r in curve]
-    for key in [k for k in (curve[0] if curve else {}) if k not in ("step", "lr")]:
-        ax.plot(steps, [r[key] for r in curve], label=key)
+    ax = axes[0, 0]
+    for key in values:
+        ax.plot(steps, [max(r[key], 1e-12) for r in curve], label=key)
     ax.set_yscale("log")
     ax.set_xlabel("step")
-    ax.set_ylabel("loss")
+    ax.set_ylabel("loss and weighted terms")
     ax.set_title(title)
     ax.legend(fontsize=7)
+    if grads:
+        ax = axes[0, 1]
+        for key in sorted(grads):
+            rows = [r for r in curve if key in r]
+            ax.plot([r["step"] for r in rows], [max(r[key], 1e-12) for r in rows], label=key, marker=".")
+        ax.set_yscale("log")
+        ax.set_xlabel("step")
+        ax.set_ylabel("gradient norm of each weighted term")
+        ax.legend(fontsize=7)
     fig.tight_layout()
     with atomic_path(out_png) as tmp:
         fig.savefig(tmp, dpi=90, format="png")

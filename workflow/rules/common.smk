@@ -206,7 +206,7 @@ def final_outputs():
         "results/figures/maps.png",
         "results/tables/table1.csv",
         "results/figures/contact_maps.png",
-    ] + prediction_outputs() + [f"results/figures/{kind}_{task}.png" for task in config["scenes"]["tasks"]
+    ] + [f"results/models/{task}/checks.json" for task in config["scenes"]["tasks"]] + prediction_outputs() + [f"results/figures/{kind}_{task}.png" for task in config["scenes"]["tasks"]
                                 for kind in ("scenes", "predictions")]
 
 

@@ -48,3 +48,22 @@ rule predict:
         "results/benchmarks/predictions/{task}/{method}.tsv"
     script:
         "../scripts/predict.py"
+
+
+rule model_checks:
+    input:
+        shards=train_shards,
+        grasp_model="results/models/{task}/grasp_diffuser.pt",
+        contact_model="results/models/{task}/contact_diffuser.pt",
+        hand="results/hand/hand.npz",
+        code=code("models", "data/maps", "data/store", "grasps/expand", "hand"),
+    output:
+        "results/models/{task}/checks.json",
+    params:
+        seed=setting("training", "common", "seed"),
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/models/{task}/checks.log",
+    script:
+        "../scripts/model_checks.py"

@@ -1,0 +1,251 @@
+"""Does a trained GraspDiffuser (or ContactDiffuser) use its condition? Two measurements on training data.
+
+- :func:`shuffled_condition_gap`: the denoising loss with each sample's own condition against the same
+  loss with the conditions shuffled across the batch (every sample gets another configuration's object
+  and map), at the same timesteps and noise. A network that reads its condition loses accuracy when it is
+  handed the wrong one; one that ignores it (it learnt only the marginal of the data) does not.
+- :func:`contact_fit`: ContactDiffuser's maps against the configuration's ground-truth maps (IoU).
+- :func:`grasp_fit`: grasps sampled from ground-truth contact maps of training configurations, compared
+  with the configuration's ground-truth grasps: whether the hand touches the object (some hand vertex within
+  ``touch`` of the object cloud), how deep it enters it, and how far its wrist is from the nearest
+  ground-truth wrist (and that grasp's rotation). The contact maps were made by those grasps, so a model
+  that reads them can put the hand back where it was.
+
+Both return plain dicts (JSON-able) and are what ``results/models/<task>/checks.json`` holds.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from tohgs.data.maps import MapDataset
+from tohgs.hand.model import HandModel
+from tohgs.hand.rotations import axis_angle_to_matrix
+from tohgs.models.diffusion import NoiseSchedule, sample
+from tohgs.models.grasp_diffuser import GraspCondition
+from tohgs.models.train import _collate, load_model
+
+log = logging.getLogger(__name__)
+
+
+def _derangement(n: int, generator: torch.Generator) -> torch.Tensor:
+    """A permutation of range(n) without fixed points (n >= 2): a random shift of a random order."""
+    order = torch.randperm(n, generator=generator)
+    shift = int(torch.randint(1, n, (1,), generator=generator))
+    perm = torch.empty(n, dtype=torch.long)
+    perm[order] = order.roll(shift)
+    return perm
+
+
+@torch.no_grad()
+def shuffled_condition_gap(name: str, model, data: MapDataset, n_samples: int = 256, seed: int = 0,
+                           timesteps: tuple[int, ...] = (50, 200, 500, 800)) -> dict:
+    """Denoising loss with the true and with shuffled conditions, per timestep and overall.
+
+    Args:
+        name: ``"grasp_diffuser"`` (loss: L_diff, the summed squared error of the normalised grasp) or
+            ``"contact_diffuser"`` (the mean squared error of the noise).
+        model: the trained network (eval mode).
+        data: training items (``per="grasp"``).
+        n_samples: items drawn (with replacement, seeded).
+        timesteps: the t at which both losses are measured (the same noise for both).
+
+    Returns:
+        ``{"true": {t: loss}, "shuffled": {t: loss}, "gap": (shuffled - true) / true over all t}``; the
+        shuffle pairs samples of different configurations where the data has more than one. For
+        GraspDiffuser also ``"context"`` / ``"gap_context"``: the sample's own frame (the contact frame is
+        derived from the map, so it is part of the condition too) with only the network's context swapped.
+    """
+    g = torch.Generator().manual_seed(seed)
+    idx = torch.randint(0, len(data), (n_samples,), generator=g).tolist()
+    batch = _collate([data[i] for i in idx], torch.device("cpu"))
+    configs = torch.as_tensor([data.index[i][0] * 1_000_000 + int(data.shards[data.index[i][0]].grasp_config[data.index[i][1]])
+                               for i in idx])
+    perm = _derangement(n_samples, g)
+    for _ in range(20):  # prefer partners of another configuration
+        same = configs[perm] == configs
+        if not same.any() or len(set(configs.tolist())) < 2:
+            break
+        perm[same] = perm[same][torch.randperm(int(same.sum()), generator=g)]
+        perm = torch.where(perm == torch.arange(n_samples), perm.roll(1), perm)
+    sched = NoiseSchedule(model.diffusion)
+    shuffled = {k: v[perm] for k, v in batch.items() if k != "grasp"}
+    if name == "grasp_diffuser":
+        own = model.condition(batch["points"], batch["normals"], batch["contact"])
+        other = model.condition(shuffled["points"], shuffled["normals"], shuffled["contact"])
+        # Each sample's own grasp under a condition: the training loss of a batch whose conditions were
+        # shuffled. "context" keeps the sample's own frame and swaps only what the network reads.
+        context = GraspCondition(other.glob, other.tokens, own.rotation, own.origin, own.points)
+        cases = {"true": (own, model.encode(batch["grasp"], own)),
+                 "shuffled": (other, model.encode(batch["grasp"], other)),
+                 "context": (context, model.encode(batch["grasp"], own))}
+    else:
+        x0 = 2 * batch["contact"] - 1
+        cases = {"true": (model.condition(batch["points"], batch["normals"], batch["d_init"], batch["d_goal"]), x0),
+                 "shuffled": (model.condition(shuffled["points"], shuffled["normals"], shuffled["d_init"],
+                                              shuffled["d_goal"]), x0)}
+    out: dict = {k: {} for k in cases}
+    for t in timesteps:
+        tt = torch.full((n_samples,), t, dtype=torch.long)
+        noise = torch.randn(cases["true"][1].shape, generator=g)
+        for key, (cond, x0) in cases.items():
+            x_t = sched.q_sample(x0, noise, tt)
+            pred = model(x_t, tt, cond)
+            if name == "grasp_diffuser":
+                loss = ((pred - x0) ** 2).sum(-1).mean()
+            else:
+                loss = ((pred - noise) ** 2).mean()
+            out[key][str(t)] = float(loss)
+    true = sum(out["true"].values())
+    for key in [k for k in cases if k != "true"]:
+        out[f"gap_{key}" if key != "shuffled" else "gap"] = (sum(out[key].values()) - true) / max(true, 1e-12)
+    return out
+
+
+def _rotation_angle(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Angles (radians) between rotation matrices (..., 3, 3)."""
+    cos = ((a.transpose(-1, -2) @ b).diagonal(dim1=-2, dim2=-1).sum(-1) - 1) / 2
+    return torch.arccos(cos.clamp(-1.0, 1.0))
+
+
+@torch.no_grad()
+def grasp_fit(model, hand: HandModel, data: MapDataset, max_configs: int = 24, samples: int = 4, steps: int = 20,
+              sampler: str = "ddim", touch: float = 0.005, seed: int = 0) -> dict:
+    """Grasps sampled from the ground-truth contact maps of training configurations, against the
+    configuration's ground-truth grasps, and the same for the trivial baseline.
+
+    The baseline is the normaliser's mean put through the model's frame (``decode(0)``): the average
+    training grasp in the network frame, or, with ``frame="contact"``, at its average place relative to
+    each map's contact frame. A network that ignores what it reads does no better than that.
+
+    Args:
+        model: a trained GraspDiffuser (eval mode).
+        hand: the hand model.
+        data: training items (``per="grasp"``; augmentation off, so grasps and points share the frame).
+        max_configs: configurations looked at (the first ones with a grasp, in shard order).
+        samples: grasps per configuration, one per ground-truth contact map (cycled).
+        touch: a hand touches the object when some vertex is within this distance of the cloud, m.
+
+    Returns:
+        For the model and for ``baseline``: ``touch_rate`` (fraction of hands that touch),
+        ``wrist_error_median`` (m, to the nearest ground-truth wrist of the configuration) and
+        ``rotation_error_median`` (degrees, to that grasp).
+    """
+    g = torch.Generator().manual_seed(seed)
+    by_config: dict[tuple[int, int], list[int]] = {}
+    for i, (s, r) in enumerate(data.index):
+        by_config.setdefault((s, int(data.shards[s].grasp_config[r])), []).append(i)
+    keys = list(by_config)[:max_configs]
+    wrist0 = hand.rest_joints[0]
+    stats = {k: {"touch": [], "wrist": [], "rotation": []} for k in ("model", "baseline")}
+    for s, c in keys:
+        items = [data[i] for i in by_config[(s, c)]]
+        true = torch.as_tensor(np.stack([it["grasp"] for it in items]))
+        pick = [k % len(items) for k in range(samples)]
+        pts = torch.as_tensor(items[0]["points"])[None].expand(samples, -1, -1)
+        nrm = torch.as_tensor(items[0]["normals"])[None].expand(samples, -1, -1)
+        cmap = torch.as_tensor(np.stack([items[k]["contact"] for k in pick]))
+        cond = model.condition(pts, nrm, cmap)
+        x0 = sample(lambda xt, tt: model(xt, tt, cond), (samples, model.dim), model.diffusion, sampler, steps, g)
+        for key, pred in (("model", model.decode(x0, cond)), ("baseline", model.decode(torch.zeros_like(x0), cond))):
+            d = torch.cdist(pts, hand(pred).vertices).min(-1).values  # (S, N) object point to hand
+            stats[key]["touch"] += (d.min(-1).values < touch).tolist()
+            dist = torch.cdist(pred[:, :3] + wrist0, true[:, :3] + wrist0)  # (S, G) wrist to wrist
+            best = dist.argmin(-1)
+            stats[key]["wrist"] += dist.min(-1).values.tolist()
+            stats[key]["rotation"] += torch.rad2deg(_rotation_angle(axis_angle_to_matrix(pred[:, 3:6]),
+                                                                     axis_angle_to_matrix(true[best, 3:6]))).tolist()
+
+    def summary(v: dict[str, list]) -> dict:
+        if not v["wrist"]:
+            return {"touch_rate": math.nan, "wrist_error_median": math.nan, "rotation_error_median": math.nan}
+        return {"touch_rate": float(np.mean(v["touch"])), "wrist_error_median": float(np.median(v["wrist"])),
+                "rotation_error_median": float(np.median(v["rotation"]))}
+
+    return {"configs": len(keys), "grasps": len(stats["model"]["wrist"]), **summary(stats["model"]),
+            "baseline": summary(stats["baseline"])}
+
+
+def _iou(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """IoU of boolean maps: (S, N) against (G, N) -> (S, G)."""
+    a, b = a.float(), b.float()
+    inter = a @ b.T
+    union = a.sum(-1, keepdim=True) + b.sum(-1) - inter
+    return torch.where(union > 0, inter / union.clamp_min(1), torch.ones_like(inter))
+
+
+@torch.no_grad()
+def contact_fit(model, data: MapDataset, max_configs: int = 24, samples: int = 4, steps: int = 20,
+                sampler: str = "ddim", threshold: float = 0.5, seed: int = 0) -> dict:
+    """Contact maps sampled for configurations of ``data`` against the configuration's ground-truth maps.
+
+    A point is in contact where the map exceeds ``threshold`` (0.5: within about 1.1 cm of the hand at the
+    contact alpha of 100). Each sampled map scores its best IoU with a ground-truth map of its own
+    configuration. The comparison does the same for the ground-truth maps of the *other* configurations
+    of the same object (the points are the same samples of the same mesh), each scored like a sampled map:
+    a predictor that draws one of the object's grasps without looking at the scene. (The same prior grasp
+    kept in two configurations gives the same map, so some of these score 1.)
+
+    Returns:
+        ``iou_median`` (sampled maps), ``other_config_iou_median`` (other configurations' maps, where the
+        object has another configuration) and ``contact_fraction`` (the sampled maps' mean share of
+        points in contact; the ground truth's as ``true_contact_fraction``).
+    """
+    g = torch.Generator().manual_seed(seed)
+    by_config: dict[tuple[int, int], list[int]] = {}
+    for i, (s, r) in enumerate(data.index):
+        by_config.setdefault((s, int(data.shards[s].grasp_config[r])), []).append(i)
+    keys = list(by_config)[:max_configs]
+    ious, base, frac, true_frac = [], [], [], []
+    for s, c in keys:
+        items = [data[i] for i in by_config[(s, c)]]
+        true = torch.as_tensor(np.stack([it["contact"] for it in items])) > threshold
+        obj = int(data.shards[s].object_id[c])
+        others = [i for (s2, c2), ids in by_config.items() if (s2, c2) != (s, c)
+                  and int(data.shards[s2].object_id[c2]) == obj and data.shards[s2].attrs["objects"] == data.shards[s].attrs["objects"]
+                  for i in ids]
+        if others:
+            other = torch.as_tensor(np.stack([data[i]["contact"] for i in others])) > threshold
+            base += _iou(other, true).max(-1).values.tolist()
+        it = items[0]
+        pts = torch.as_tensor(it["points"])[None].expand(samples, -1, -1)
+        nrm = torch.as_tensor(it["normals"])[None].expand(samples, -1, -1)
+        d_i = torch.as_tensor(it["d_init"])[None].expand(samples, -1)
+        d_g = torch.as_tensor(it["d_goal"])[None].expand(samples, -1)
+        cond = model.condition(pts, nrm, d_i, d_g)
+        x = sample(lambda xt, tt: model(xt, tt, cond), (samples, pts.shape[1]), model.diffusion, sampler, steps, g)
+        pred = (x.clamp(-1, 1) + 1) / 2 > threshold
+        ious += _iou(pred, true).max(-1).values.tolist()
+        frac.append(float(pred.float().mean()))
+        true_frac.append(float(true.float().mean()))
+    return {"configs": len(keys), "iou_median": float(np.median(ious)) if ious else math.nan,
+            "other_config_iou_median": float(np.median(base)) if base else math.nan,
+            "contact_fraction": float(np.mean(frac)) if frac else math.nan,
+            "true_contact_fraction": float(np.mean(true_frac)) if true_frac else math.nan}
+
+
+def model_checks(task: str, shard_paths: list[str | Path], grasp_ckpt: str | Path, contact_ckpt: str | Path,
+                 hand: HandModel, out: str | Path, seed: int = 0) -> dict:
+    """Both measurements for a task's two trained diffusers on their training shards; written as JSON."""
+    from tohgs.io import write_json
+
+    torch.set_num_threads(1)
+    result: dict = {"task": task}
+    plain = MapDataset(shard_paths, per="grasp", rotation="none")
+    for name, ckpt in (("grasp_diffuser", grasp_ckpt), ("contact_diffuser", contact_ckpt)):
+        model, meta = load_model(ckpt)
+        # the gap is measured on what the model was trained on: its own augmentation
+        seen = MapDataset(shard_paths, per="grasp", rotation=meta["train_settings"]["rotation"], seed=seed)
+        result[name] = {"shuffled_condition": shuffled_condition_gap(name, model, seen, seed=seed)}
+        if name == "grasp_diffuser":
+            result[name]["fit"] = grasp_fit(model, hand, plain, seed=seed)
+        else:
+            result[name]["fit"] = contact_fit(model, plain, seed=seed)
+        log.info("%s/%s: %s", task, name, result[name])
+    write_json(out, result)
+    return result
