@@ -13,7 +13,7 @@ from torch import nn
 from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
 from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, sample, timestep_embedding
 from tohgs.models.grasp_diffuser import GraspCondition, GraspDiffuser, GraspDiffuserConfig, grasp_losses, vertex_normals
-from tohgs.models.train import EMA, cosine_with_warmup
+from tohgs.models.train import EMA, cosine_with_warmup, training_step
 
 SMALL_PN = {"sa": [[32, 0.05, 8, [16, 32]], [8, 0.1, 8, [32, 32]], [0, 0.0, 0, [32, 48]]], "fp": [[32], [32], [32]]}
 
@@ -176,6 +176,28 @@ def test_contact_diffuser_overfits_one_batch_and_reloads_to_identical_samples(tm
         outs.append(sample(lambda x, tt: m(x, tt, cond), (2, 64), m.diffusion, "ddim", 10, torch.Generator().manual_seed(5)))
     torch.testing.assert_close(outs[0], outs[1])
     assert outs[0].shape == (2, 64) and outs[0].abs().max() <= 1.0 + 1e-6
+
+
+@pytest.mark.parametrize("prediction", ["epsilon", "sample"])
+def test_contact_diffuser_trains_on_the_target_its_config_names(prediction):
+    """``diffusion.prediction`` decides what the loss compares with: the noise or the clean map (x0)."""
+    torch.manual_seed(0)
+    diffusion = asdict(DiffusionConfig(beta_end=0.02, prediction=prediction))
+    model = ContactDiffuser(ContactDiffuserConfig(d_model=32, n_blocks=1, pointnet=SMALL_PN, diffusion=diffusion)).eval()
+    batch, sched = _contact_batch(), NoiseSchedule(model.diffusion)
+    with torch.no_grad():
+        loss = training_step("contact_diffuser", model, batch, sched, torch.Generator().manual_seed(3), None,
+                             (1.0, 1.0, 1.0, 1.0), 1.0)["loss"]
+        g = torch.Generator().manual_seed(3)
+        t = torch.randint(0, sched.timesteps, (2,), generator=g)
+        x0 = 2 * batch["contact"] - 1
+        noise = torch.randn(x0.shape, generator=g)
+        pred = model(sched.q_sample(x0, noise, t), t,
+                     model.condition(batch["points"], batch["normals"], batch["d_init"], batch["d_goal"]))
+    losses = {"epsilon": ((pred - noise) ** 2).mean(), "sample": ((pred - x0) ** 2).mean()}
+    torch.testing.assert_close(loss, losses[prediction])
+    other = "sample" if prediction == "epsilon" else "epsilon"
+    assert abs(float(loss - losses[other])) > 1e-3
 
 
 @pytest.fixture(scope="module")

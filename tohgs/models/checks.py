@@ -49,7 +49,7 @@ def shuffled_condition_gap(name: str, model, data: MapDataset, n_samples: int = 
 
     Args:
         name: ``"grasp_diffuser"`` (loss: L_diff, the summed squared error of the normalised grasp) or
-            ``"contact_diffuser"`` (the mean squared error of the noise).
+            ``"contact_diffuser"`` (the mean squared error of its target, the noise or the clean map).
         model: the trained network (eval mode).
         data: training items (``per="grasp"``).
         n_samples: items drawn (with replacement, seeded).
@@ -98,8 +98,8 @@ def shuffled_condition_gap(name: str, model, data: MapDataset, n_samples: int = 
             pred = model(x_t, tt, cond)
             if name == "grasp_diffuser":
                 loss = ((pred - x0) ** 2).sum(-1).mean()
-            else:
-                loss = ((pred - noise) ** 2).mean()
+            else:  # the network's own target: the noise (epsilon) or the clean map (sample)
+                loss = ((pred - (noise if sched.cfg.prediction == "epsilon" else x0)) ** 2).mean()
             out[key][str(t)] = float(loss)
     true = sum(out["true"].values())
     for key in [k for k in cases if k != "true"]:

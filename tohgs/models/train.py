@@ -184,7 +184,8 @@ def training_step(name: str, model, batch: dict[str, torch.Tensor], sched: Noise
         noise = torch.randn(x0.shape, generator=generator).to(dev)
         x_t = sched.q_sample(x0, noise, t)
         cond = model.condition(batch["points"], batch["normals"], batch["d_init"], batch["d_goal"])
-        loss = torch.nn.functional.mse_loss(model(x_t, t, cond), noise)
+        target = noise if sched.cfg.prediction == "epsilon" else x0
+        loss = torch.nn.functional.mse_loss(model(x_t, t, cond), target)
         return {"loss": loss}
     cond = model.condition(batch["points"], batch["normals"], batch["contact"])
     x0 = model.encode(batch["grasp"], cond)

@@ -66,14 +66,25 @@ def object_dirs():
     return expand("results/objects/{object}", object=sorted(OBJECTS))
 
 
+def _portable(path):
+    """``path`` relative to the working directory when it lies inside it (the checkout's ``.venv``, a user
+    folder in the checkout), else as given: a moved or re-cloned checkout then names the same inputs and
+    params, and Snakemake reruns nothing."""
+    rel = os.path.relpath(path)
+    return path if rel.startswith("..") else rel
+
+
 def object_source(wildcards):
     """The source mesh of a file-based object (none for generated bricks)."""
     spec = OBJECTS[wildcards.object]
-    return [spec.path] if spec.path else []
+    return [_portable(spec.path)] if spec.path else []
 
 
 def object_spec(wildcards):
-    return _canonical(OBJECTS[wildcards.object].to_dict())
+    spec = OBJECTS[wildcards.object].to_dict()
+    if spec["path"]:
+        spec["path"] = _portable(spec["path"])
+    return _canonical(spec)
 
 
 def object_size(wildcards):
