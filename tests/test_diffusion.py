@@ -339,3 +339,21 @@ def test_guidance_needs_an_unconditional_model_and_scale_1_is_the_conditional_on
         cond = cfg.condition(pts, nrm, contact)
         c, u = cfg(x, t, cond), cfg(x, t, cfg.drop_context(cond, torch.ones(2, dtype=torch.bool)))
         torch.testing.assert_close(cfg.guided(x, t, cond, 2.0), u + 2.0 * (c - u))
+
+
+def test_contact_smoothing_averages_over_neighbours_and_keeps_regions():
+    from tohgs.models.predict import smooth_contact
+
+    g = torch.Generator().manual_seed(0)
+    pts = torch.rand(400, 3, generator=g) * 0.1
+    region = (pts[:, 0] < 0.05).float()  # a coherent half, 1 inside and 0 outside
+    noisy = (region + (torch.rand(400, generator=g) < 0.2).float() * (1 - 2 * region)).clamp(0, 1)[None]  # 20 % flipped
+    torch.testing.assert_close(smooth_contact(pts, noisy, 0), noisy)
+    torch.testing.assert_close(smooth_contact(pts, noisy, 1), noisy)
+    smooth = smooth_contact(pts, noisy, 8)
+    assert smooth.shape == noisy.shape and float(smooth.min()) >= 0 and float(smooth.max()) <= 1
+    # the flipped points are mostly restored, the region kept: fewer points on the wrong side of 0.5
+    wrong = lambda m: float(((m > 0.5).float() != region).float().mean())  # noqa: E731
+    assert wrong(smooth) < 0.5 * wrong(noisy[0]), (wrong(noisy[0]), wrong(smooth))
+    ones = torch.ones(2, 400)
+    torch.testing.assert_close(smooth_contact(pts, ones, 8), ones)

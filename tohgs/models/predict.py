@@ -28,7 +28,8 @@ log = logging.getLogger(__name__)
 @dataclass(frozen=True)
 class PredictSettings:
     """``samples`` S per configuration (the paper's 16); sampler ``ddpm`` (all T steps) or ``ddim`` with
-    ``steps`` steps; ``seed``; ``device``; GraspDiffuser's classifier-free ``guidance`` scale."""
+    ``steps`` steps; ``seed``; ``device``; GraspDiffuser's classifier-free ``guidance`` scale;
+    ``contact_smoothing``, the neighbours over which ContactDiffuser's maps are averaged (0: none)."""
 
     samples: int = 16
     sampler: str = "ddim"
@@ -37,6 +38,25 @@ class PredictSettings:
     threads: int = 1
     device: str = "auto"
     guidance: float = 1.0  # GraspDiffuser's classifier-free guidance scale (1: none; needs cond_dropout)
+    contact_smoothing: int = 0  # k of :func:`smooth_contact` for ContactDiffuser's maps (0 or 1: none)
+
+
+def smooth_contact(points: torch.Tensor, contact: torch.Tensor, k: int) -> torch.Tensor:
+    """Each contact value replaced by the mean over its ``k`` nearest points (itself among them).
+
+    Args:
+        points: (N, 3) object points, m.
+        contact: (S, N) contact maps of those points, in [0, 1].
+        k: neighbours; ``k <= 1`` returns ``contact`` unchanged.
+
+    Returns:
+        (S, N) smoothed maps, in [0, 1].
+    """
+    if k <= 1:
+        return contact
+    k = min(k, points.shape[0])
+    nn = torch.cdist(points, points).topk(k, largest=False).indices  # (N, k), the point itself first
+    return contact[:, nn].mean(-1)
 
 
 def _gt_contacts(shard, c: int, n: int) -> np.ndarray | None:
@@ -99,7 +119,7 @@ def predict(task: str, method: str, test_shards: list[str | Path], grasp_ckpt: s
                 cond = contact_model.condition(pts, nrm, d_i, d_g)
             x = sample(lambda xt, tt: contact_model(xt, tt, cond), (s.samples, pts.shape[1]), contact_model.diffusion,
                        s.sampler, s.steps, gen, device)
-            contact = ((x.clamp(-1, 1) + 1) / 2).cpu().numpy()
+            contact = smooth_contact(pts[0], (x.clamp(-1, 1) + 1) / 2, s.contact_smoothing).cpu().numpy()
         elif other is not None:
             contact = other["contact"][i][: s.samples]
         else:
