@@ -308,13 +308,16 @@ class GraspDiffuser(nn.Module):
         return (torch.eye(3, dtype=points.dtype, device=points.device).expand(b, 3, 3),
                 torch.zeros(b, 3, dtype=points.dtype, device=points.device))
 
+    def _framed_vector(self, grasp: torch.Tensor, rotation: torch.Tensor, origin: torch.Tensor) -> torch.Tensor:
+        """(B, 51) network-frame grasps -> (B, D) unnormalised vectors in the frame (rotation, origin)."""
+        if self.cfg.frame == "contact":
+            grasp = grasp_to_frame(grasp, rotation, origin, self.wrist)
+        return self.vector_of(grasp)
+
     def in_frame(self, grasp: torch.Tensor, points: torch.Tensor, contact: torch.Tensor) -> torch.Tensor:
         """(B, 51) network-frame grasps as (B, D) unnormalised vectors in the network's frame (what the
         normaliser measures)."""
-        rot, origin = self.frame_of(points, contact)
-        if self.cfg.frame == "contact":
-            grasp = grasp_to_frame(grasp, rot, origin, self.wrist)
-        return self.vector_of(grasp)
+        return self._framed_vector(grasp, *self.frame_of(points, contact))
 
     def condition(self, points: torch.Tensor, normals: torch.Tensor, contact: torch.Tensor) -> GraspCondition:
         """The condition of (B, N, 3) points with (B, N, 3) normals and their (B, N) contact map."""
@@ -332,9 +335,7 @@ class GraspDiffuser(nn.Module):
 
     def encode(self, grasp: torch.Tensor, cond: GraspCondition) -> torch.Tensor:
         """(B, 51) network-frame grasps -> the (B, D) normalised vectors the network denoises (its frame)."""
-        if self.cfg.frame == "contact":
-            grasp = grasp_to_frame(grasp, cond.rotation, cond.origin, self.wrist)
-        return self.normalise(self.vector_of(grasp))
+        return self.normalise(self._framed_vector(grasp, cond.rotation, cond.origin))
 
     def in_frame_grasp(self, x: torch.Tensor) -> torch.Tensor:
         """(B, D) normalised vectors -> (B, 51) grasps in the network's frame (the hand losses pose them)."""

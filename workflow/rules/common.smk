@@ -206,6 +206,7 @@ def metric_outputs(wildcards):
 
 def final_outputs():
     """The default target's outputs known before the catalog exists (see catalog_outputs)."""
+    tasks = config["scenes"]["tasks"]
     return [
         "results/objects/catalog.csv",
         "results/objects/supports",
@@ -217,8 +218,8 @@ def final_outputs():
         "results/figures/maps.png",
         "results/tables/table1.csv",
         "results/figures/contact_maps.png",
-    ] + [f"results/models/{task}/checks.json" for task in config["scenes"]["tasks"]] + prediction_outputs() + [f"results/figures/{kind}_{task}.png" for task in config["scenes"]["tasks"]
-                                for kind in ("scenes", "predictions")]
+    ] + prediction_outputs() + [f"results/models/{task}/checks.json" for task in tasks] + [
+        f"results/figures/{kind}_{task}.png" for task in tasks for kind in ("scenes", "predictions")]
 
 
 def catalog_outputs(wildcards):
