@@ -2,7 +2,7 @@
 with full DDPM (all T = 1000 steps) and DDIM with k steps, for trained checkpoints of one task.
 
 Samples ``--samples`` (the paper's 16) per test configuration for ``--configs`` configurations of the task's
-test shards, as ``tohgs.models.predict`` does, one torch thread. Needs a finished training run
+test shards, as ``tohgs.methods.predict`` does, one torch thread. Needs a finished training run
 (``results/models/<task>/*.pt``). Writes ``benchmarks/results/sampling.json``.
 """
 
@@ -19,7 +19,7 @@ import torch
 
 from tohgs.data.maps import MapDataset
 from tohgs.models.diffusion import sample
-from tohgs.models.train import load_model
+from tohgs.models.checkpoint import load_component
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -35,13 +35,13 @@ def main() -> None:
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "sampling.json"))
     args = ap.parse_args()
     torch.set_num_threads(1)
-    torch.backends.mha.set_fastpath_enabled(False)  # as tohgs.models.predict
+    torch.backends.mha.set_fastpath_enabled(False)  # as tohgs.methods.predict
     shards = sorted(glob.glob(args.shards.format(task=args.task)))
     if not shards:
         raise SystemExit(f"no test shards match {args.shards.format(task=args.task)}: run the workflow first")
     data = MapDataset(shards, per="config")
-    contact, _ = load_model(Path(args.models) / args.task / "contact_diffuser.pt", "cpu")
-    grasp, _ = load_model(Path(args.models) / args.task / "grasp_diffuser.pt", "cpu")
+    contact, _ = load_component(Path(args.models) / args.task / "contact_diffuser.pt", "cpu")
+    grasp, _ = load_component(Path(args.models) / args.task / "grasp_diffuser.pt", "cpu")
     s = args.samples
     out = {"benchmark": "sampling", "machine": platform.processor() or platform.machine(), "task": args.task,
            "threads": 1, "samples_per_config": s, "configs": min(args.configs, len(data)),

@@ -54,6 +54,21 @@ def test_defaults_are_filled_in_place():
         ({"objects": {"sources": {"dir": {"path": "no/such/folder"}}}}, "objects.sources.dir.path", "does not exist"),
         ({"objects": {"sources": {"pybullet_data": {"random_urdfs": 0, "named": 0}, "bricks": {"count": 0}}}},
          "objects.sources", "empty"),
+        ({"components": {"cvae": {"kind": "grasp_cvae"}}}, "components.cvae.kind", "unknown component kind"),
+        ({"components": {"contact_diffuser": {"network": {"d_modle": 8}}}}, "components.contact_diffuser.network.d_modle",
+         "unknown key"),
+        ({"components": {"grasp_diffuser": {"training": {"step": 3}}}}, "components.grasp_diffuser.training.step",
+         "unknown key"),
+        ({"methods": {"ours": {"contact": "contact_difuser"}}}, "methods.ours.contact", "is not a component"),
+        ({"methods": {"ours": {"contact": "grasp_diffuser"}}}, "methods.ours.contact", "is a grasp component"),
+        ({"methods": {"x": {"label": "X", "kind": "contact_grasp", "contact": "ground_truth"}}}, "methods.x.grasp",
+         "required"),
+        ({"methods": {"x": {"label": "X", "kind": "retrieval"}}}, "methods.x.kind", "unknown method kind"),
+        ({"methods": {"ours": {"settings": {"sampler": "euler"}}}}, "methods.ours.settings.sampler", "is not one of"),
+        ({"methods": {"Ours": {"label": "X", "kind": "reference"}}}, "methods", "does not match"),
+        ({"tables": {"table1": {"rows": ["dataset", "oracle"]}}}, "tables.table1.rows", "is not a method"),
+        ({"tables": {"t2": {"rows": ["ours"], "columns": ["tss"]}}}, "tables.t2.columns.0", "is not one of"),
+        ({"figures": {"method": "oracle"}}, "figures.method", "is not a method"),
     ],
 )
 def test_invalid_config_names_key_and_problem(default_config, patch, key, problem):
@@ -76,3 +91,52 @@ def test_invalid_config_stops_the_workflow_before_any_job(repo, tmp_path):
     assert "config key 'seed'" in out.stderr + out.stdout and "out of range" in out.stderr + out.stdout
     assert not (tmp_path / "results").exists(), "a job ran despite the invalid config"
 
+
+
+def test_a_config_adds_methods_and_tables_to_the_built_in_ones_and_fills_their_defaults():
+    cfg = validate_config({"methods": {"ours-ddpm": {"label": "Ours (DDPM)", "kind": "contact_grasp",
+                                                     "contact": "contact_diffuser", "grasp": "grasp_diffuser",
+                                                     "settings": {"sampler": "ddpm"}}},
+                           "tables": {"samplers": {"rows": ["ours", "ours-ddpm"]}},
+                           "components": {"grasp_diffuser": {"kind": "grasp_diffuser", "network": {"d_model": 32}}}})
+    assert set(cfg["methods"]) == {"dataset", "ours", "ours-gt-contact", "ours-ddpm"}
+    assert set(cfg["tables"]) == {"table1", "samplers"} and cfg["tables"]["samplers"]["columns"][-1] == "configs"
+    gd = cfg["components"]["grasp_diffuser"]
+    # a built-in entry overlaid: the keys the config does not give come from the built-in one
+    assert gd["network"]["d_model"] == 32 and gd["network"]["n_blocks"] == 3 and gd["training"]["steps"] == 2400
+    assert cfg["components"]["contact_diffuser"]["training"] == {"steps": 800, "batch": 16}  # the built-in entry
+
+
+def test_the_settings_dataclasses_default_to_the_schema():
+    """One source of truth: a library default that differs from the schema's is a test failure."""
+    import dataclasses
+
+    from tohgs.methods.base import PredictSettings
+    from tohgs.models.contact_diffuser import ContactDiffuserConfig
+    from tohgs.models.grasp_diffuser import GraspDiffuserConfig
+    from tohgs.models.train import TrainSettings
+
+    cfg = validate_config({})
+    schema = load_schema()
+    networks = {}
+    for kind in ("contact_diffuser", "grasp_diffuser"):
+        networks[kind] = {}
+        from tohgs.config import _fill_defaults
+
+        _fill_defaults(networks[kind], schema["$defs"]["networks"][kind])
+    pairs = [(TrainSettings, cfg["training"]), (PredictSettings, cfg["prediction"]),
+             (ContactDiffuserConfig, networks["contact_diffuser"]), (GraspDiffuserConfig, networks["grasp_diffuser"])]
+    for cls, block in pairs:
+        for f in dataclasses.fields(cls):
+            value = getattr(cls(), f.name)
+            assert f.name in block, f"{cls.__name__}.{f.name} is not in the schema"
+            expect = block[f.name]
+            norm = (lambda v: [norm(x) for x in v] if isinstance(v, (list, tuple)) else v)  # noqa: E731
+            assert norm(value) == norm(expect), f"{cls.__name__}.{f.name}: {value!r} != schema {expect!r}"
+
+
+def test_every_network_key_has_description_and_default():
+    schema = load_schema()
+    for kind, sub in schema["$defs"]["networks"].items():
+        for parts, leaf in iter_schema_keys(sub):
+            assert "description" in leaf and "default" in leaf, f"$defs.networks.{kind}.{'.'.join(parts)}"

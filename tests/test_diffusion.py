@@ -13,7 +13,8 @@ from torch import nn
 from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
 from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, sample, timestep_embedding
 from tohgs.models.grasp_diffuser import GraspCondition, GraspDiffuser, GraspDiffuserConfig, grasp_losses, vertex_normals
-from tohgs.models.train import EMA, cosine_with_warmup, training_step
+from tohgs.data.batch import Batch
+from tohgs.models.train import EMA, cosine_with_warmup
 
 SMALL_PN = {"sa": [[32, 0.05, 8, [16, 32]], [8, 0.1, 8, [32, 32]], [0, 0.0, 0, [32, 48]]], "fp": [[32], [32], [32]]}
 
@@ -186,8 +187,9 @@ def test_contact_diffuser_trains_on_the_target_its_config_names(prediction):
     model = ContactDiffuser(ContactDiffuserConfig(d_model=32, n_blocks=1, pointnet=SMALL_PN, diffusion=diffusion)).eval()
     batch, sched = _contact_batch(), NoiseSchedule(model.diffusion)
     with torch.no_grad():
-        loss = training_step("contact_diffuser", model, batch, sched, torch.Generator().manual_seed(3), None,
-                             (1.0, 1.0, 1.0, 1.0), 1.0)["loss"]
+        typed = Batch(points=batch["points"], normals=batch["normals"], d_init=batch["d_init"], d_goal=batch["d_goal"],
+                      scene=torch.zeros(2, 4, 3), goal_transform=torch.eye(4).expand(2, 4, 4), contact=batch["contact"])
+        loss = model.loss(typed, torch.Generator().manual_seed(3))["loss"]
         g = torch.Generator().manual_seed(3)
         t = torch.randint(0, sched.timesteps, (2,), generator=g)
         x0 = 2 * batch["contact"] - 1
@@ -274,7 +276,7 @@ def test_the_contact_frame_turns_about_z_and_grasps_go_there_and_back(hand):
     a = torch.tensor(0.7)
     turn = torch.tensor([[a.cos(), -a.sin(), 0.0], [a.sin(), a.cos(), 0.0], [0.0, 0.0, 1.0]])
     rot2, origin2 = contact_frame(pts @ turn.T, contact)
-    from tohgs.grasps.expand import transform_grasp
+    from tohgs.geometry.grasp import transform_grasp
 
     T = np.eye(4)
     T[:3, :3] = turn.numpy()
@@ -342,7 +344,7 @@ def test_guidance_needs_an_unconditional_model_and_scale_1_is_the_conditional_on
 
 
 def test_contact_smoothing_averages_over_neighbours_and_keeps_regions():
-    from tohgs.models.predict import smooth_contact
+    from tohgs.methods.contact_grasp import smooth_contact
 
     g = torch.Generator().manual_seed(0)
     pts = torch.rand(400, 3, generator=g) * 0.1

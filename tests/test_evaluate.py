@@ -8,10 +8,10 @@ import pytest
 import trimesh
 
 from tests.test_maps import built  # noqa: F401  (the module-scoped tiny dataset)
-from tohgs.grasps.expand import SceneCollider
+from tohgs.geometry.scene import SceneCollider
 from tohgs.metrics.evaluate import COLUMNS, _ObjectAssets, diversity, grasp_metrics, occupied_fraction
 from tohgs.metrics.quality import DisplacementSimulator, SDSettings, surface_voxels
-from tohgs.metrics.tables import QualityThresholds, markdown, qr_grid, summarize, table1
+from tohgs.metrics.tables import METRIC_COLUMNS, QualityThresholds, markdown, metric_table, qr_grid, summarize
 
 
 def test_diversity_is_zero_for_identical_hands_and_the_summed_shift_otherwise():
@@ -53,8 +53,7 @@ def test_grasp_metrics_of_a_clear_and_a_sunk_hand_at_a_moved_pose(cube_assets):
     table.apply_translation((0.3, -0.2, 0.5 - 0.06 - 0.05))  # top face through the clear slab's centre
     sd = SDSettings(gravity_direction="fixed")
     with DisplacementSimulator(cube_assets.collision, cube_assets.vertex_mean, sd) as sim:
-        m = grasp_metrics(verts, verts, slab.faces, np.arange(4), cube_assets, pose, SceneCollider([table]), sd,
-                          0.001, sim)
+        m = grasp_metrics(verts, verts, slab.faces, np.arange(4), cube_assets, pose, SceneCollider([table]), 0.001, sim)
     assert m["pv"][0] == 0.0 and m["pv"][1] > 1e-6
     assert m["contact_distance"][0] == pytest.approx(0.03, abs=1e-3) and m["contact_distance"][1] < 0
     assert 0.02 < m["sd"][0] < 0.035  # nothing holds the cube: it falls onto the slab 3 cm below
@@ -86,23 +85,30 @@ def test_summary_numbers_follow_their_definitions():
     assert summarize(f, QualityThresholds(max_sd=0.04))["qr"] == pytest.approx(75.0)
 
 
-def test_table1_orders_rows_and_leaves_missing_methods_empty():
+LABELS = {"dataset": "Dataset", "ours": "Ours"}
+
+
+def test_a_table_orders_rows_labels_them_and_leaves_missing_methods_empty():
     rows = pd.concat([_rows([0.0], [0.0], [0.0], [0.0], method="dataset"),
                       _rows([1e-5], [0.05], [0.0], [0.0], method="ours", task="stacking")])
-    t = table1(rows, ["placing", "stacking"], ["dataset", "ours"], QualityThresholds())
+    t = metric_table(rows, ["placing", "stacking"], ["dataset", "ours"], LABELS, list(METRIC_COLUMNS), QualityThresholds())
     assert list(zip(t.task, t.method)) == [("placing", "Dataset"), ("placing", "Ours"), ("stacking", "Dataset"),
                                            ("stacking", "Ours")]
     assert t.qr.iloc[0] == 100.0 and t.qr.iloc[3] == 0.0
     assert np.isnan(t.qr.iloc[1]) and t.grasps.iloc[1] == 0
     md = markdown(t)
     assert md.count("\n") == 2 + 4 and "| placing | Dataset |" in md and "–" in md
+    few = metric_table(rows, ["placing"], ["ours", "dataset"], {}, ["ts", "qr"], QualityThresholds())
+    assert list(few.columns) == ["task", "method", "ts", "qr"] and list(few.method) == ["ours", "dataset"]
+    with pytest.raises(ValueError, match="unknown table columns"):
+        metric_table(rows, ["placing"], ["ours"], {}, ["tss"], QualityThresholds())
 
 
 def test_qr_grid_is_monotone_in_both_thresholds():
     rng = np.random.default_rng(1)
     f = _rows(pv=rng.uniform(0, 5e-6, 200), sd=rng.uniform(0, 0.04, 200), init_opp=np.zeros(200),
               goal_opp=np.zeros(200))
-    g = qr_grid(f, ["placing"], ["ours"], [1e-6, 2e-6, 3e-6, 4e-6], [0.01, 0.02, 0.03])
+    g = qr_grid(f, ["placing"], ["ours"], LABELS, [1e-6, 2e-6, 3e-6, 4e-6], [0.01, 0.02, 0.03])
     assert len(g) == 12
     q = g.pivot(index="max_pv_cm3", columns="max_sd_cm", values="qr").to_numpy()
     assert (np.diff(q, axis=0) >= 0).all() and (np.diff(q, axis=1) >= 0).all() and q[-1, -1] > q[0, 0]
@@ -112,13 +118,15 @@ def test_reference_grasps_evaluate_collision_free_at_both_poses(built, tmp_path)
     """The dataset row end to end on the tiny dataset: ground-truth grasps in the world frame, carried to
     the goal, one metric row per grasp, no hand vertex inside the table at either pose."""
     from tohgs.data.maps import read_map_shard
-    from tohgs.data.predictions import read_predictions, reference_predictions
-    from tohgs.grasps.expand import transform_grasp
+    from tohgs.data.predictions import read_predictions
+    from tohgs.geometry.grasp import transform_grasp
+    from tohgs.methods.predict import predict
     from tohgs.metrics.evaluate import evaluate_predictions
 
     tmp, hand, _, _, _ = built
     shard = tmp / "shard-0.zarr"
-    arrays = reference_predictions([shard], "placing", 4, 0, tmp_path / "dataset.zarr")
+    arrays = predict("placing", "dataset", {"label": "Dataset", "kind": "reference"}, [shard], {},
+                     {"samples": 4, "seed": 0, "device": "cpu"}, tmp_path / "dataset.zarr")
     sh = read_map_shard(shard)
     stored, attrs = read_predictions(tmp_path / "dataset.zarr")
     assert attrs["method"] == "dataset" and stored["grasp_init"].shape == (sh.n_configs, 4, 51)

@@ -10,7 +10,8 @@ from scipy.spatial.transform import Rotation
 from tohgs.assets.bricks import make_brick
 from tohgs.assets.supports import make_table
 from tohgs.data.scenes import SceneSet
-from tohgs.grasps.expand import ExpansionSettings, expand_configurations, pose_matrix, transform_grasp
+from tohgs.geometry.grasp import pose_matrix, transform_grasp
+from tohgs.grasps.expand import ExpansionSettings, expand_configurations
 from tohgs.hand import load_hand
 
 

@@ -31,7 +31,8 @@ from tohgs.data.predictions import read_predictions, write_predictions
 from tohgs.data.scenes import SceneSet, read_scenes, write_scenes
 from tohgs.data.task_grasps import read_task_grasps, write_task_grasps
 from tohgs.io import atomic_dir, atomic_path
-from tohgs.models.train import load_checkpoint, load_model, pick_device, train_model
+from tohgs.models.checkpoint import load_checkpoint, load_component
+from tohgs.models.train import pick_device, train_component
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -56,12 +57,12 @@ def test_a_checkpoint_that_carries_code_is_refused_and_nothing_runs(built, tmp_p
     if kind == "checkpoint":
         torch.save(evil, tmp_path / "m.pt")
         with pytest.raises(ValueError, match=r"m\.pt: not a readable checkpoint of plain data; refused"):
-            load_model(tmp_path / "m.pt")
+            load_component(tmp_path / "m.pt")
     else:
         tmp = built[0]
         torch.save({**evil, "ema": {"step_count": 1}}, tmp_path / "m.pt.resume")
         with pytest.raises(ValueError, match=r"m\.pt\.resume: not a readable checkpoint of plain data"):
-            train_model("contact_diffuser", "placing", [tmp / "shard-0.zarr"], TINY["contact_diffuser"], SETTINGS,
+            train_component("contact_diffuser", "contact_diffuser", "placing", [tmp / "shard-0.zarr"], TINY["contact_diffuser"], SETTINGS,
                         tmp_path / "m.pt", hand=built[1])
     assert not marker.exists()
     torch.save({"plain": torch.zeros(2), "n": 3}, tmp_path / "ok.pt")  # plain data still loads
@@ -213,19 +214,19 @@ def test_a_resume_file_of_other_settings_starts_afresh(built, tmp_path, monkeypa
 
     monkeypatch.setattr(torch.nn.utils, "clip_grad_norm_", crash)
     with pytest.raises(KeyboardInterrupt):
-        train_model("contact_diffuser", "placing", shards, TINY["contact_diffuser"], SETTINGS, tmp_path / "a.pt", hand=hand)
+        train_component("contact_diffuser", "contact_diffuser", "placing", shards, TINY["contact_diffuser"], SETTINGS, tmp_path / "a.pt", hand=hand)
     assert (tmp_path / "a.pt.resume").is_file()
     monkeypatch.setattr(torch.nn.utils, "clip_grad_norm_", real)
     changed = {**SETTINGS, "lr": 1e-3}
     with caplog.at_level("INFO"):
-        resumed = train_model("contact_diffuser", "placing", shards, TINY["contact_diffuser"], changed, tmp_path / "a.pt",
+        resumed = train_component("contact_diffuser", "contact_diffuser", "placing", shards, TINY["contact_diffuser"], changed, tmp_path / "a.pt",
                               hand=hand)
     assert "written by a run with other settings or data" in caplog.text and "resuming" not in caplog.text
-    straight = train_model("contact_diffuser", "placing", shards, TINY["contact_diffuser"], changed, tmp_path / "b.pt",
+    straight = train_component("contact_diffuser", "contact_diffuser", "placing", shards, TINY["contact_diffuser"], changed, tmp_path / "b.pt",
                            hand=hand)
     for k, v in straight["state_dict"].items():
         torch.testing.assert_close(resumed["state_dict"][k], v, msg=k)
-    assert resumed["train_settings"]["lr"] == 1e-3
+    assert resumed["training_config"]["lr"] == 1e-3
 
 
 # ---------------------------------------------------------------------------------------------------------

@@ -9,9 +9,13 @@ import torch
 from tests.test_diffusion import SMALL_PN
 from tests.test_maps import built  # noqa: F401  (the module-scoped fixture)
 from tohgs.data.predictions import read_predictions
-from tohgs.grasps.expand import transform_grasp
-from tohgs.models.predict import predict
-from tohgs.models.train import load_model, train_model
+from tohgs.geometry.grasp import transform_grasp
+from tohgs.methods.predict import predict
+from tohgs.models.checkpoint import load_component
+from tohgs.models.train import train_component
+
+OURS = {"label": "Ours", "kind": "contact_grasp", "contact": "contact_diffuser", "grasp": "grasp_diffuser"}
+OURS_GT = {"label": "Ours (GT contact)", "kind": "contact_grasp", "contact": "ground_truth", "grasp": "grasp_diffuser"}
 
 TINY = {"contact_diffuser": {"d_model": 16, "n_blocks": 1, "pointnet": SMALL_PN},
         "grasp_diffuser": {"d_model": 16, "n_blocks": 1, "pointnet": SMALL_PN}}
@@ -26,23 +30,32 @@ def trained(built, tmp_path_factory):  # noqa: F811
     paths = {}
     for name in ("contact_diffuser", "grasp_diffuser"):
         paths[name] = out / f"{name}.pt"
-        train_model(name, "placing", [tmp / "shard-0.zarr"], TINY[name], SETTINGS, paths[name], hand=hand,
-                    curve_png=out / f"{name}.png")
+        train_component(name, name, "placing", [tmp / "shard-0.zarr"], TINY[name], SETTINGS, paths[name], hand=hand,
+                        curve_png=out / f"{name}.png")
     return tmp, hand, out, paths
 
 
 def test_checkpoints_hold_weights_config_normaliser_and_curve(trained):
+    import tohgs
+
     _, hand, out, paths = trained
     for name, path in paths.items():
-        model, ckpt = load_model(path)
-        assert ckpt["name"] == name and ckpt["model_config"] == TINY[name] and len(ckpt["loss_curve"]) == 5
+        model, ckpt = load_component(path)
+        assert ckpt["format"] == "tohgs.checkpoint" and ckpt["tohgs_version"] == tohgs.__version__
+        assert ckpt["component"] == name == ckpt["kind"] == model.kind and ckpt["network_config"] == TINY[name]
+        assert ckpt["training_config"]["steps"] == SETTINGS["steps"] and len(ckpt["loss_curve"]) == 5
         assert all(np.isfinite(r["loss"]) for r in ckpt["loss_curve"]) and (out / f"{name}.png").stat().st_size > 5000
         assert not path.with_name(path.name + ".resume").exists()
-    g, _ = load_model(paths["grasp_diffuser"])
+    g, ckpt = load_component(paths["grasp_diffuser"])
     assert not torch.allclose(g.grasp_std, torch.ones(g.dim)), "the grasp normaliser is saved"
+    torch.testing.assert_close(ckpt["normaliser"]["std"], g.grasp_std)
+    assert load_component(paths["contact_diffuser"])[1]["normaliser"] is None
     assert torch.allclose(g.wrist, hand.rest_joints[0]) and g.palm.abs().sum() > 0, "the hand's wrist and palm are saved"
     with pytest.raises(ValueError, match="not a readable checkpoint"):
-        load_model(out / "contact_diffuser.png")
+        load_component(out / "contact_diffuser.png")
+    torch.save({"name": "contact_diffuser", "state_dict": {}}, out / "old.pt")
+    with pytest.raises(ValueError, match=r"old\.pt: not a tohgs checkpoint .*older tohgs"):
+        load_component(out / "old.pt")
 
 
 def test_an_interrupted_run_resumes_to_the_same_weights(trained, monkeypatch):
@@ -59,11 +72,13 @@ def test_an_interrupted_run_resumes_to_the_same_weights(trained, monkeypatch):
     target = out / "again.pt"
     monkeypatch.setattr(torch.nn.utils, "clip_grad_norm_", crash)
     with pytest.raises(KeyboardInterrupt):
-        train_model("contact_diffuser", "placing", [tmp / "shard-0.zarr"], TINY["contact_diffuser"], SETTINGS, target,
+        train_component("contact_diffuser", "contact_diffuser", "placing", [tmp / "shard-0.zarr"], TINY["contact_diffuser"],
+                        SETTINGS, target,
                     hand=hand)
     assert target.with_name("again.pt.resume").is_file() and not target.exists()
     monkeypatch.setattr(torch.nn.utils, "clip_grad_norm_", real)
-    resumed = train_model("contact_diffuser", "placing", [tmp / "shard-0.zarr"], TINY["contact_diffuser"], SETTINGS,
+    resumed = train_component("contact_diffuser", "contact_diffuser", "placing", [tmp / "shard-0.zarr"], TINY["contact_diffuser"],
+                        SETTINGS,
                           target, hand=hand)
     straight = torch.load(paths["contact_diffuser"], weights_only=True)
     for k, v in straight["state_dict"].items():
@@ -76,21 +91,21 @@ def test_a_resume_file_of_an_older_format_is_refused_by_name(trained):
     torch.save({"model": {}, "ema": {"decay": 0.99, "optimization_step": 3, "shadow_params": []}},
                target.with_name("old.pt.resume"))
     with pytest.raises(ValueError, match=r"old\.pt\.resume.*older tohgs"):
-        train_model("contact_diffuser", "placing", [tmp / "shard-0.zarr"], TINY["contact_diffuser"], SETTINGS, target,
+        train_component("contact_diffuser", "contact_diffuser", "placing", [tmp / "shard-0.zarr"], TINY["contact_diffuser"],
+                        SETTINGS, target,
                     hand=hand)
 
 
 def test_predictions_are_reproducible_and_carried_to_the_goal(trained):
     tmp, hand, out, paths = trained
     settings = {"samples": 3, "sampler": "ddim", "steps": 4, "seed": 1, "device": "cpu"}
-    a = predict("placing", "ours", [tmp / "shard-0.zarr"], paths["grasp_diffuser"], "model", settings, out / "p.zarr",
-                contact_ckpt=paths["contact_diffuser"])
-    b = predict("placing", "ours", [tmp / "shard-0.zarr"], paths["grasp_diffuser"], "model", settings, out / "q.zarr",
-                contact_ckpt=paths["contact_diffuser"])
+    a = predict("placing", "ours", OURS, [tmp / "shard-0.zarr"], paths, settings, out / "p.zarr")
+    b = predict("placing", "ours", OURS, [tmp / "shard-0.zarr"], paths, settings, out / "q.zarr")
     np.testing.assert_array_equal(a["grasp_init"], b["grasp_init"])
     arrays, attrs = read_predictions(out / "p.zarr")
     assert arrays["grasp_init"].shape == (2, 3, 51) and arrays["contact"].shape == (2, 3, 256)
-    assert attrs["timing"]["seconds_per_grasp"] > 0 and attrs["contact_source"] == "model"
+    assert attrs["timing"]["seconds_per_grasp"] > 0 and attrs["method_config"]["contact"] == "contact_diffuser"
+    assert set(attrs["components"]) == {"contact_diffuser", "grasp_diffuser"}
     assert arrays["contact"].min() >= 0 and arrays["contact"].max() <= 1
     from tohgs.data.maps import read_map_shard
 
@@ -99,6 +114,6 @@ def test_predictions_are_reproducible_and_carried_to_the_goal(trained):
     for c in range(2):
         moved = transform_grasp(arrays["grasp_init"][c], sh.goal_transform[c], wrist)
         np.testing.assert_allclose(arrays["grasp_goal"][c], moved, atol=1e-5)
-    gt = predict("placing", "ours-gt-contact", [tmp / "shard-0.zarr"], paths["grasp_diffuser"], "ground_truth",
+    gt = predict("placing", "ours-gt-contact", OURS_GT, [tmp / "shard-0.zarr"], {"grasp_diffuser": paths["grasp_diffuser"]},
                  settings, out / "gt.zarr")
     np.testing.assert_array_equal(gt["contact"][0][0], sh.contact[np.flatnonzero(sh.grasp_config == 0)[0]])

@@ -26,7 +26,12 @@ pytestmark = pytest.mark.slow
 
 def _snakemake(workdir: Path, *args: str, configfile: str = ".test/config/config.yaml") -> subprocess.CompletedProcess:
     cmd = [sys.executable, "-m", "snakemake", "--cores", "2", "--configfile", configfile, *args]
-    return subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=1800)
+    return subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=1800, env=_env(workdir))
+
+
+def _env(workdir: Path) -> dict[str, str]:
+    """The jobs import the copy's library, not the checkout's (an editable install points there)."""
+    return {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(workdir), os.environ.get("PYTHONPATH")]))}
 
 
 def _stale_jobs(workdir: Path, configfile: str = ".test/config/config.yaml") -> dict[str, int]:
@@ -38,6 +43,13 @@ def _stale_jobs(workdir: Path, configfile: str = ".test/config/config.yaml") -> 
         return {}
     block = text.split("Job stats:", 1)[1]
     return {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+)\s+(\d+)$", block, re.M) if m.group(1) != "total"}
+
+
+def _smoke_config(workdir: Path) -> dict:
+    """The smoke config as the workflow sees it: the file over the schema's defaults."""
+    from tohgs.config import validate_config
+
+    return validate_config(yaml.safe_load((workdir / ".test/config/config.yaml").read_text()), base_dir=workdir)
 
 
 @pytest.fixture(scope="module")
@@ -84,8 +96,10 @@ def test_the_smoke_models_read_their_condition_and_untrained_copies_do_not(smoke
 
     from tohgs.data.maps import MapDataset
     from tohgs.hand import HandAssets, HandModel
+    from tohgs.models.checkpoint import load_component
     from tohgs.models.checks import shuffled_condition_gap
-    from tohgs.models.train import build_model, load_model, seen_grasps
+    from tohgs.models.component import build_component
+    from tohgs.models.grasp_diffuser import seen_grasps
 
     hand = HandModel(HandAssets.load(smoke_run / "results/hand/hand.npz"))
     for task in ("placing", "stacking", "shelving"):
@@ -100,16 +114,16 @@ def test_the_smoke_models_read_their_condition_and_untrained_copies_do_not(smoke
         torch.manual_seed(0)
         for name, key, bound in (("grasp_diffuser", "gap_context", MIN_GRASP_CONTEXT_GAP / 4),
                                  ("contact_diffuser", "gap", MIN_CONTACT_GAP / 2)):
-            _, ckpt = load_model(smoke_run / f"results/models/{task}/{name}.pt")
-            fresh = build_model(name, ckpt["model_config"]).eval()
+            _, ckpt = load_component(smoke_run / f"results/models/{task}/{name}.pt")
+            fresh = build_component(ckpt["kind"], ckpt["network_config"]).eval()
             if name == "grasp_diffuser":
                 fresh.set_hand(hand)
                 fresh.set_normaliser(seen_grasps(fresh, seen, torch.device("cpu")))
-            assert abs(shuffled_condition_gap(name, fresh, seen)[key]) < bound, (task, name)
+            assert abs(shuffled_condition_gap(fresh, seen)[key]) < bound, (task, name)
 
 
 def test_smoke_run_outputs(smoke_run):
-    cfg = yaml.safe_load((smoke_run / ".test/config/config.yaml").read_text())
+    cfg = _smoke_config(smoke_run)
     cat = pd.read_csv(smoke_run / "results/objects/catalog.csv", keep_default_na=False)
     src = cfg["objects"]["sources"]
     n_expected = src["pybullet_data"]["random_urdfs"] + src["pybullet_data"]["named"] + src["bricks"]["count"]
@@ -174,17 +188,18 @@ def test_smoke_run_outputs(smoke_run):
 
     from tohgs.data.predictions import read_predictions
 
+    methods = cfg["tables"]["table1"]["rows"]
     for task in cfg["scenes"]["tasks"]:
         for model in ("contact_diffuser", "grasp_diffuser"):
             ckpt = torch.load(smoke_run / f"results/models/{task}/{model}.pt", weights_only=True)
-            assert ckpt["loss_curve"][-1]["step"] == cfg["training"][model]["steps"]
+            assert ckpt["format"] == "tohgs.checkpoint" and ckpt["component"] == model
+            assert ckpt["loss_curve"][-1]["step"] == cfg["components"][model]["training"]["steps"]
             assert (smoke_run / f"results/models/{task}/{model}.png").is_file()
-        for method in cfg["prediction"]["methods"]:
+        for method in methods:
             arrays, attrs = read_predictions(smoke_run / f"results/predictions/{task}/{method}.zarr")
             assert arrays["grasp_init"].shape[1] == cfg["prediction"]["samples"] and attrs["method"] == method
     from tohgs.metrics.evaluate import COLUMNS
 
-    methods = cfg["evaluation"]["methods"]
     for task in cfg["scenes"]["tasks"]:
         for method in methods:
             rows = pd.read_parquet(smoke_run / f"results/metrics/{task}/{method}.parquet")
@@ -192,15 +207,14 @@ def test_smoke_run_outputs(smoke_run):
             assert ((rows.init_opp >= 0) & (rows.init_opp <= 1) & (rows.pv >= 0) & (rows.sd >= 0)).all()
         assert (smoke_run / f"results/figures/predictions_{task}.png").stat().st_size > 20_000
     table = pd.read_csv(smoke_run / "results/tables/table1.csv")
-    from tohgs.metrics.tables import METHOD_LABELS
-
-    assert len(table) == 3 * len(methods) and list(table.method[: len(methods)]) == [METHOD_LABELS[m] for m in methods]
+    labels = {"dataset": "Dataset", "ours": "Ours"}  # the methods' labels (the schema's default methods)
+    assert len(table) == 3 * len(methods) and list(table.method[: len(methods)]) == [labels[m] for m in methods]
     assert table.grasps.sum() > 0
     # The dataset row holds collision-free ground-truth grasps: OPP near zero by construction (the
     # expansion lets vertices sink at most 2 mm into the scene).
     ref = table[(table.method == "Dataset") & (table.grasps > 0)]
     assert len(ref) and (ref.init_opp < 1.0).all() and (ref.goal_opp < 1.0).all()
-    assert len(pd.read_csv(smoke_run / "results/tables/qr_grid.csv")) == 3 * len(methods) * 12
+    assert len(pd.read_csv(smoke_run / "results/tables/table1_qr_grid.csv")) == 3 * len(methods) * 12
     assert "| Task |" in (smoke_run / "results/tables/table1.md").read_text()
     assert (smoke_run / "results/figures/contact_maps.png").stat().st_size > 20_000
 
@@ -251,15 +265,16 @@ def _n_scenes(smoke_run) -> int:
 
 
 N_MAPS = 6  # 3 tasks x (1 train + 1 test) shards in the smoke config (no validation shards)
-MODELS = {"train": 6, "predict": 3, "model_checks": 3}  # 3 tasks x 2 models; 3 tasks x ours; a check per task
-# The evaluation of every task's predictions: 3 tasks x 2 table methods (dataset, ours).
-EVALUATION = {"reference_grasps": 3, "evaluate": 6, "table1": 1, "predictions_figure": 3, "contact_maps_figure": 1}
+# 3 tasks x 2 components; 3 tasks x 2 table methods (dataset, ours); a check per task.
+MODELS = {"train": 6, "predict": 6, "model_checks": 3}
+# The evaluation of every task's predictions: 3 tasks x 2 table methods.
+EVALUATION = {"evaluate": 6, "table": 1, "predictions_figure": 3, "contact_maps_figure": 1}
 
 
 def _evaluated(methods_per_task: int, tasks: int = 3) -> dict[str, int]:
     """The evaluation jobs after ``methods_per_task`` prediction stores of ``tasks`` tasks changed (the
     figures read ``ours`` of every task)."""
-    return {"evaluate": methods_per_task * tasks, "table1": 1, "predictions_figure": tasks, "contact_maps_figure": 1}
+    return {"evaluate": methods_per_task * tasks, "table": 1, "predictions_figure": tasks, "contact_maps_figure": 1}
 
 
 def _downstream(n_maps: int) -> dict[str, int]:
@@ -281,7 +296,7 @@ def _fed_shards(smoke_run, tasks=("placing", "stacking", "shelving")) -> int:
     upstream changes do not reach it)."""
     from tohgs.assets.sources import task_set
 
-    cfg = yaml.safe_load((smoke_run / ".test/config/config.yaml").read_text())
+    cfg = _smoke_config(smoke_run)
     cat = pd.read_csv(smoke_run / "results/objects/catalog.csv", keep_default_na=False)
     cat = cat[cat.status == "ok"]
     return sum(n for task in tasks for split, n in cfg["maps"]["shards"].items()
@@ -309,16 +324,17 @@ def test_editing_code_makes_exactly_its_stage_stale(smoke_run):
     # The catalog is a checkpoint: a dry run lists the jobs up to it and those whose outputs are fixed
     # targets (the figures); the scene stores after it are decided once it has run.
     with _edited(smoke_run / "tohgs/assets/mesh.py"):
+        # (not the supports: their job does not run the mesh code, tohgs.code_inputs)
         assert _stale_jobs(smoke_run) == {"all": 1, "prepare_object": n_objects, "catalog": 1, "objects_figure": 1,
-                                          "supports": 1, "scenes_figure": 3, **AFTER_CATALOG}
+                                          "scenes_figure": 3, **AFTER_CATALOG}
     with _edited(smoke_run / "tohgs/viz/render.py"):
         assert _stale_jobs(smoke_run) == {"all": 1, "objects_figure": 1, "hand_figure": 1, "scenes_figure": 3,
                                           "prior_figure": 1, "maps_figure": 1, "predictions_figure": 3,
                                           "contact_maps_figure": 1}
     with _edited(smoke_run / "tohgs/metrics/tables.py"):
-        assert _stale_jobs(smoke_run) == {"all": 1, "table1": 1}
+        assert _stale_jobs(smoke_run) == {"all": 1, "table": 1}
     with _edited(smoke_run / "tohgs/metrics/evaluate.py"):
-        assert _stale_jobs(smoke_run) == {"all": 1, "evaluate": 6, "table1": 1}
+        assert _stale_jobs(smoke_run) == {"all": 1, "evaluate": 6, "table": 1}
     with _edited(smoke_run / "tohgs/sim/world.py"):
         assert _stale_jobs(smoke_run) == {"all": 1, "scenes": n_scenes, "scenes_figure": 3, "task_grasps": n_task,
                                           **_downstream(fed)}
@@ -335,7 +351,7 @@ def test_editing_code_makes_exactly_its_stage_stale(smoke_run):
 
 
 def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
-    cfg = yaml.safe_load((smoke_run / ".test/config/config.yaml").read_text())
+    cfg = _smoke_config(smoke_run)
     n_bricks = cfg["objects"]["sources"]["bricks"]["count"]
     n_objects = len(pd.read_csv(smoke_run / "results/objects/catalog.csv"))
     n_stacking = len(list((smoke_run / "results/scenes/stacking").glob("*.zarr")))
@@ -366,9 +382,8 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
     stacking = dict(cfg["scenes"]["stacking"], max_offset=0.005)
     assert stale_with(("scenes.stacking", stacking)) == {"all": 1, "scenes": n_stacking, "scenes_figure": 1,
                                                          "task_grasps": n_stacking, "maps": _fed_shards(smoke_run, ("stacking",)),
-                                                         "dataset_summary": 1, "maps_figure": 1, "train": 2, "predict": 1,
-                                                         "model_checks": 1,
-                                                         "reference_grasps": 1, **_evaluated(2, tasks=1),
+                                                         "dataset_summary": 1, "maps_figure": 1, "train": 2, "predict": 2,
+                                                         "model_checks": 1, **_evaluated(2, tasks=1),
                                                          "contact_maps_figure": 1}
     # A hand setting concerns the hand only (a MANO file needs a path that exists).
     (smoke_run / "MANO_RIGHT.pkl").write_bytes(b"")
@@ -389,16 +404,74 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
     assert stale_with(("maps.points", dict(cfg["maps"]["points"], n_points=96))) == {"all": 1, **DATASET}
     # A ContactDiffuser size: its three trainings and the predictions that sample from it (not ours-gt-contact);
     # a sampling setting: the predictions only.
-    contact = dict(cfg["models"]["contact_diffuser"], d_model=24)
-    assert stale_with(("models.contact_diffuser", contact)) == {"all": 1, "train": 3, "predict": 3, "model_checks": 3,
-                                                                **_evaluated(1)}
+    contact = dict(cfg["components"]["contact_diffuser"]["network"], d_model=24)
+    assert stale_with(("components.contact_diffuser.network", contact)) == {
+        "all": 1, "train": 3, "predict": 3, "model_checks": 3, **_evaluated(1)}
+    # A sampling setting: the predictions of the methods that sample (not the dataset row's draw).
     assert stale_with(("prediction", dict(cfg["prediction"], steps=4))) == {"all": 1, "predict": 3, **_evaluated(1)}
-    # A training setting: that model's trainings, their predictions, their evaluation and the tables.
-    grasp = dict(cfg["training"]["grasp_diffuser"], steps=cfg["training"]["grasp_diffuser"]["steps"] + 1)
-    assert stale_with(("training.grasp_diffuser", grasp)) == {"all": 1, "train": 3, "predict": 3, "model_checks": 3,
-                                                              **_evaluated(1)}
-    # A QR threshold or the table's methods: the tables only; an SD setting: the prior grasps and the evaluation.
-    assert stale_with(("evaluation.qr", {"max_pv": 2.0e-06, "max_sd": 0.02})) == {"all": 1, "table1": 1}
-    assert stale_with(("evaluation.methods", ["ours"])) == {"all": 1, "table1": 1}
+    # A training setting: that component's trainings, their predictions, their evaluation and the tables.
+    grasp = dict(cfg["components"]["grasp_diffuser"]["training"], steps=cfg["components"]["grasp_diffuser"]["training"]["steps"] + 1)
+    assert stale_with(("components.grasp_diffuser.training", grasp)) == {"all": 1, "train": 3, "predict": 3,
+                                                                         "model_checks": 3, **_evaluated(1)}
+    # A QR threshold or the table's rows: the tables only; a label: the tables only.
+    assert stale_with(("evaluation.qr", {"max_pv": 2.0e-06, "max_sd": 0.02})) == {"all": 1, "table": 1}
+    assert stale_with(("tables.table1", {"rows": ["ours"]})) == {"all": 1, "table": 1}
+    assert stale_with(("methods.ours", {"label": "Ours (CD + GD)", "kind": "contact_grasp", "contact": "contact_diffuser",
+                                        "grasp": "grasp_diffuser"})) == {"all": 1, "table": 1}
     # The dumps above sort the keys: the order of keys in a config file is not a change.
     assert stale_with(("seed", cfg["seed"])) == {}
+
+
+def test_a_method_and_a_table_added_by_config_alone_run_through_prediction_evaluation_and_the_tables(smoke_run):
+    """One config block adds a method (Ours sampled with DDPM, reusing the trained components) and another
+    a table with it: only its predictions, their evaluation and the tables run, no training; the rows
+    carry its label. The smoke run's own outputs stay as they were (the added config is a second file)."""
+    added = {"methods": {"ours-ddpm": {"label": "Ours (DDPM 10)", "kind": "contact_grasp", "contact": "contact_diffuser",
+                                       "grasp": "grasp_diffuser", "settings": {"sampler": "ddpm", "steps": 10}}},
+             "tables": {"samplers": {"rows": ["ours", "ours-ddpm"], "columns": ["qr", "init_opp", "goal_opp", "ts"]}}}
+    (smoke_run / "added.yaml").write_text(yaml.safe_dump(added))
+    target = "results/tables/samplers.csv"
+    cmd = [sys.executable, "-m", "snakemake", "--cores", "2", target, "--configfile", ".test/config/config.yaml",
+           "added.yaml"]
+    dry = subprocess.run([*cmd, "-n", "--quiet", "rules"], cwd=smoke_run, capture_output=True, text=True, timeout=600,
+                         env=_env(smoke_run))
+    assert dry.returncode == 0, dry.stderr[-3000:]
+    block = (dry.stdout + dry.stderr).split("Job stats:", 1)[1]
+    jobs = {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+)\s+(\d+)$", block, re.M) if m.group(1) != "total"}
+    assert jobs == {"predict": 3, "evaluate": 3, "table": 1}, jobs
+    run = subprocess.run(cmd, cwd=smoke_run, capture_output=True, text=True, timeout=1200, env=_env(smoke_run))
+    assert run.returncode == 0, (run.stdout + run.stderr)[-4000:]
+    table = pd.read_csv(smoke_run / target)
+    assert list(table.columns) == ["task", "method", "qr", "init_opp", "goal_opp", "ts"]
+    assert list(table.method) == ["Ours", "Ours (DDPM 10)"] * 3 and table.ts.notna().all()
+    from tohgs.data.predictions import read_predictions
+
+    _, attrs = read_predictions(smoke_run / "results/predictions/placing/ours-ddpm.zarr")
+    assert attrs["config"]["sampler"] == "ddpm" and attrs["config"]["steps"] == 10
+    assert _stale_jobs(smoke_run) == {}
+
+
+def test_the_code_inputs_are_derived_from_the_imports(tmp_path):
+    """The modules a script reaches through others count (task expansion reads the hand's assets and the
+    supports; a prediction loads its method's and its components' kinds by name), and so do lazy imports."""
+    from tohgs.code_inputs import code_inputs
+
+    def listed(script, *modules):
+        return {f.relative_to(REPO).as_posix() for f in code_inputs(REPO / "workflow/scripts" / script, modules, REPO)}
+
+    assert {"tohgs/hand/assets.py", "tohgs/assets/supports.py", "tohgs/geometry/scene.py", "tohgs/data/store.py",
+            "tohgs/__init__.py"} <= listed("task_grasps.py")
+    assert {"tohgs/hand/assets.py", "tohgs/metrics/quality.py"} <= listed("evaluate.py")
+    assert "tohgs/models/grasp_diffuser.py" not in listed("predict.py")
+    assert {"tohgs/methods/contact_grasp.py", "tohgs/models/grasp_diffuser.py", "tohgs/hand/model.py"} <= listed(
+        "predict.py", "methods/contact_grasp", "models/grasp_diffuser")
+    # a lazy import inside a function is code the job may run
+    pkg = tmp_path / "tohgs"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("def f():\n    from tohgs import b\n    return b\n")
+    (pkg / "b.py").write_text("import numpy\n")
+    (tmp_path / "s.py").write_text("import tohgs.a\n")
+    assert {f.name for f in code_inputs(tmp_path / "s.py", (), tmp_path)} == {"__init__.py", "a.py", "b.py"}
+    with pytest.raises(FileNotFoundError, match="no module"):
+        code_inputs(tmp_path / "s.py", ("models/nothing",), tmp_path)

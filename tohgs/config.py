@@ -35,14 +35,33 @@ def _key_path(parts: Any) -> str:
 
 
 def _fill_defaults(instance: Any, schema: Mapping[str, Any]) -> None:
-    """Insert schema defaults for missing object properties, recursively (in place)."""
+    """Insert schema defaults for missing object properties, recursively (in place). A mapping of named
+    entries (``additionalProperties`` a schema) fills each entry; one marked ``x-merge-default`` also
+    gains the default's entries it lacks, and the keys it lacks of the default's entries of the same name
+    (a config adds methods to the built-in ones, or changes one key of a built-in component)."""
     if not isinstance(instance, dict) or schema.get("type") != "object":
         return
     for key, sub in schema.get("properties", {}).items():
         if key not in instance and "default" in sub:
             instance[key] = copy.deepcopy(sub["default"])
+        elif key in instance and sub.get("x-merge-default") and isinstance(instance[key], dict):
+            _merge_missing(instance[key], sub.get("default", {}))
         if key in instance:
             _fill_defaults(instance[key], sub)
+    entries = schema.get("additionalProperties")
+    if isinstance(entries, Mapping):
+        for key, value in instance.items():
+            if key not in schema.get("properties", {}):
+                _fill_defaults(value, entries)
+
+
+def _merge_missing(dst: dict[str, Any], src: Mapping[str, Any]) -> None:
+    """Add ``src``'s keys that ``dst`` lacks, recursively into mappings both have (``dst`` wins)."""
+    for k, v in src.items():
+        if k not in dst:
+            dst[k] = copy.deepcopy(v)
+        elif isinstance(dst[k], dict) and isinstance(v, Mapping):
+            _merge_missing(dst[k], v)
 
 
 def _error_message(err: jsonschema.ValidationError) -> str:
@@ -103,6 +122,74 @@ def _semantic_checks(cfg: Mapping[str, Any], base_dir: Path) -> None:
                           "no bricks and no dir.path)")
 
 
+def _validate_part(value: Any, schema: Mapping[str, Any], where: str) -> None:
+    """Validate one part of the config against a sub-schema, the error naming ``where`` (dotted)."""
+    errors = sorted(jsonschema.Draft202012Validator(schema).iter_errors(value),
+                    key=lambda e: (len(e.absolute_path), list(map(str, e.absolute_path))))
+    if errors:
+        msg = _error_message(errors[0])
+        raise ConfigError(msg.replace("config key '", f"config key '{where}.", 1).replace(f"'{where}.<root>'", f"'{where}'"))
+
+
+def _overlay_schema(block: Mapping[str, Any]) -> dict[str, Any]:
+    """The schema of an overlay of ``block``: its keys, none required, no defaults filled."""
+    return {"type": "object", "additionalProperties": False, "properties": block["properties"]}
+
+
+def method_setting_keys(kind: str, schema: Mapping[str, Any] | None = None) -> list[str] | None:
+    """The prediction settings a method kind reads (None: all of them), from the schema's method_kinds."""
+    schema = load_schema() if schema is None else schema
+    return schema.get("$defs", {}).get("method_kinds", {}).get(kind, {}).get("settings")
+
+
+def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -> None:
+    """Fill each component's network defaults from its kind and check what the named blocks refer to: a
+    component's kind and overlays, each method's kind and the components it names (by role), each table's
+    rows and the figures' method."""
+    networks = schema.get("$defs", {}).get("networks", {})
+    method_kinds = schema.get("$defs", {}).get("method_kinds", {})
+    props = schema["properties"]
+    roles = {}
+    for name, comp in cfg["components"].items():
+        kind, where = comp["kind"], f"components.{name}"
+        if kind not in networks or not (REPO_ROOT / "tohgs" / "models" / f"{kind}.py").is_file():
+            raise ConfigError(f"config key '{where}.kind': unknown component kind {kind!r} (known: {', '.join(sorted(networks))})")
+        _fill_defaults(comp["network"], networks[kind])
+        _validate_part(comp["network"], networks[kind], f"{where}.network")
+        _validate_part(comp["training"], _overlay_schema(props["training"]), f"{where}.training")
+        roles[name] = networks[kind].get("x-role")
+    for name, method in cfg["methods"].items():
+        kind, where = method["kind"], f"methods.{name}"
+        if kind not in method_kinds or not (REPO_ROOT / "tohgs" / "methods" / f"{kind}.py").is_file():
+            raise ConfigError(f"config key '{where}.kind': unknown method kind {kind!r} (known: {', '.join(sorted(method_kinds))})")
+        _validate_part(method["settings"], _overlay_schema(props["prediction"]), f"{where}.settings")
+        keys = method_kinds[kind].get("keys", {})
+        for key, spec in keys.items():
+            if key not in method:
+                raise ConfigError(f"config key '{where}.{key}': required by a {kind} method")
+            value, fixed = method[key], spec.get("fixed", [])
+            if value in fixed:
+                continue
+            if value not in roles:
+                choices = ", ".join([*fixed, *(c for c, r in roles.items() if r == spec["role"])])
+                raise ConfigError(f"config key '{where}.{key}': {value!r} is not a component (a {spec['role']} "
+                                  f"component of components, or: {choices})")
+            if roles[value] != spec["role"]:
+                raise ConfigError(f"config key '{where}.{key}': component {value!r} is a {roles[value]} component, "
+                                  f"a {kind} method's {key} must be a {spec['role']} component")
+        extra = set(method) - set(keys) - {"label", "kind", "settings"}
+        if extra:
+            raise ConfigError(f"config key '{where}.{sorted(extra)[0]}': not a key of a {kind} method "
+                              f"(its keys: label, kind, settings{''.join(', ' + k for k in keys)})")
+    for name, table in cfg["tables"].items():
+        for m in table["rows"]:
+            if m not in cfg["methods"]:
+                raise ConfigError(f"config key 'tables.{name}.rows': {m!r} is not a method (methods: "
+                                  f"{', '.join(sorted(cfg['methods']))})")
+    if cfg["figures"]["method"] not in cfg["methods"]:
+        raise ConfigError(f"config key 'figures.method': {cfg['figures']['method']!r} is not a method")
+
+
 def _ordered_ranges(cfg: Mapping[str, Any], schema: Mapping[str, Any]) -> None:
     """Every ``[min, max]`` pair the schema marks ``x-ordered`` must have min <= max."""
     for parts, sub in iter_schema_keys(schema):
@@ -145,6 +232,7 @@ def validate_config(cfg: dict[str, Any], schema: Mapping[str, Any] | None = None
         raise ConfigError(_error_message(errors[0]))
     _ordered_ranges(cfg, schema)
     _semantic_checks(cfg, base)
+    _components_methods_tables(cfg, schema)
     return cfg
 
 

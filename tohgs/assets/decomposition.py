@@ -10,8 +10,6 @@ CoACD settings and CoACD's version, so a rerun after an unrelated setting change
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +17,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from tohgs.io import atomic_path
+from tohgs.cache import load_or_compute
+from tohgs.io import content_key
 
 log = logging.getLogger(__name__)
 
@@ -77,13 +76,9 @@ def _coacd_version() -> str:
 
 
 def cache_key(mesh: trimesh.Trimesh, settings: DecompositionSettings) -> str:
-    """SHA-256 of the mesh geometry, the settings and the CoACD version."""
-    h = hashlib.sha256()
-    h.update(np.ascontiguousarray(mesh.vertices, dtype=np.float64).tobytes())
-    h.update(np.ascontiguousarray(mesh.faces, dtype=np.int64).tobytes())
-    h.update(json.dumps(settings.__dict__, sort_keys=True).encode())
-    h.update(_coacd_version().encode())
-    return h.hexdigest()
+    """The content key of the mesh geometry, the settings and the CoACD version (:func:`tohgs.io.content_key`)."""
+    return content_key(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64),
+                       settings.__dict__, _coacd_version())
 
 
 def _run_coacd(mesh: trimesh.Trimesh, s: DecompositionSettings) -> list[trimesh.Trimesh]:
@@ -104,12 +99,12 @@ def _run_coacd(mesh: trimesh.Trimesh, s: DecompositionSettings) -> list[trimesh.
     return out
 
 
-def _save_parts(path: Path, parts: list[trimesh.Trimesh]) -> None:
+def _save_parts(parts: list[trimesh.Trimesh], path: Path) -> None:
     arrays = {}
     for i, p in enumerate(parts):
         arrays[f"v{i}"] = np.asarray(p.vertices, dtype=np.float64)
         arrays[f"f{i}"] = np.asarray(p.faces, dtype=np.int64)
-    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+    with open(path, "wb") as fh:
         np.savez(fh, n=np.int64(len(parts)), **arrays)
 
 
@@ -140,17 +135,12 @@ def _decompose(mesh: trimesh.Trimesh, settings: DecompositionSettings,
     hull = mesh.convex_hull
     if mesh.volume >= (1.0 - settings.convex_tolerance) * hull.volume:
         return [hull], "hull"
-    key = cache_key(mesh, settings)
-    path = Path(cache_dir) / "coacd" / f"{key}.npz" if cache_dir is not None else None
-    if path is not None and path.is_file():
-        try:
-            return _load_parts(path), "coacd-cached"
-        except Exception as exc:  # a corrupt cache entry is recomputed, not trusted
-            log.warning("ignoring unreadable cache entry %s (%s)", path, exc)
-    parts = _run_coacd(mesh, settings)
-    if not parts:
-        parts = [hull]
-        log.warning("CoACD returned no part with positive volume; using the convex hull")
-    if path is not None:
-        _save_parts(path, parts)
-    return parts, "coacd"
+
+    def compute() -> list[trimesh.Trimesh]:
+        parts = _run_coacd(mesh, settings)
+        if not parts:
+            log.warning("CoACD returned no part with positive volume; using the convex hull")
+        return parts or [hull]
+
+    parts, hit = load_or_compute(cache_dir, "coacd", cache_key(mesh, settings), ".npz", compute, _save_parts, _load_parts)
+    return parts, "coacd-cached" if hit else "coacd"

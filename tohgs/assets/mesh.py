@@ -28,6 +28,25 @@ MESH_SUFFIXES = (".obj", ".stl", ".ply")
 TOUCH_INFLATION = 1.002
 
 
+OBJECT_MESH = "mesh.obj"  # the normalised mesh in an object's folder of the objects stage
+
+
+def object_mesh(objects_dir: str | Path, name: str) -> trimesh.Trimesh:
+    """The normalised mesh of object ``name`` of the objects stage, ``<objects_dir>/<name>/mesh.obj``
+    (metres, centre of mass at the origin), loaded as written (no merging: it would break seams).
+
+    Raises:
+        ValueError: the file is missing or unreadable (the message names it).
+    """
+    path = Path(objects_dir) / name / OBJECT_MESH
+    if not path.is_file():
+        raise ValueError(f"{path}: no object mesh (is '{name}' an accepted object of the objects stage?)")
+    try:
+        return trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:
+        raise ValueError(f"{path}: unreadable object mesh ({exc})") from exc
+
+
 class MeshError(ValueError):
     """A mesh that cannot be used; the message is the reason recorded in the catalog."""
 

@@ -24,9 +24,11 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from tohgs.assets.mesh import object_mesh
 from tohgs.data.maps import MapShard, write_map_shard
+from tohgs.geometry.grasp import GRASP_DIM, pose_matrix
 from tohgs.geometry.maps import nearest_distance, normalised_map, sample_surface, scene_cloud
-from tohgs.grasps.expand import pose_matrix, scene_meshes
+from tohgs.geometry.scene import scene_meshes
 from tohgs.hand.assets import HandAssets
 
 log = logging.getLogger(__name__)
@@ -72,7 +74,7 @@ def empty_split_message(task: str, split: str, attrs: dict[str, dict], grasps: d
 
 
 def _object_cloud(objects_dir: Path, name: str, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    mesh = trimesh.load(objects_dir / name / "mesh.obj", force="mesh", process=False)
+    mesh = object_mesh(objects_dir, name)
     return sample_surface(mesh, n, np.random.default_rng([int(seed), zlib.crc32(name.encode())]))
 
 
@@ -178,7 +180,7 @@ def make_map_shard(task: str, split: str, shard: int, n_shards: int, scene_store
         "goal_transform": stack(cfg_rows["goal_transform"], (4, 4), np.float64),
         "grasp_config": np.asarray(g_rows["grasp_config"], np.int32),
         "grasp_prior_index": np.asarray(g_rows["grasp_prior_index"], np.int32),
-        "grasp": np.concatenate(g_rows["grasp"]).astype(np.float32) if g_rows["grasp"] else np.zeros((0, 51), np.float32),
+        "grasp": np.concatenate(g_rows["grasp"]).astype(np.float32) if g_rows["grasp"] else np.zeros((0, GRASP_DIM), np.float32),
         "contact": stack(g_rows["contact"], (n,), np.float32),
     }
     shard_data = MapShard(arrays, {"task": task, "split": split, "shard": shard, "n_shards": n_shards, "objects": vocab,

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from tohgs.data.store import read_store, write_store
+from tohgs.geometry.grasp import GRASP_DIM
 
 SCHEMA = "tohgs.prior_grasps"
 SCHEMA_VERSION = 1
@@ -64,8 +65,8 @@ class PriorGrasps:
     def validate(self, source: str = "prior grasps") -> None:
         """Check shapes, dtypes and finiteness; raises ``ValueError`` naming ``source``."""
         b = len(self.pose)
-        if self.pose.shape != (b, 51):
-            raise ValueError(f"{source}: array 'pose' has shape {self.pose.shape}, expected ({b}, 51)")
+        if self.pose.shape != (b, GRASP_DIM):
+            raise ValueError(f"{source}: array 'pose' has shape {self.pose.shape}, expected ({b}, {GRASP_DIM})")
         if self.contact_idx.ndim != 2 or len(self.contact_idx) != b:
             raise ValueError(f"{source}: array 'contact_idx' has shape {self.contact_idx.shape}, expected ({b}, n)")
         if self.plane.shape != (b, 4):

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from tohgs.data.store import read_store, write_store
+from tohgs.geometry.grasp import GRASP_DIM
 
 SCHEMA = "tohgs.maps"
 SCHEMA_VERSION = 1
@@ -94,7 +95,7 @@ class MapShard:
         n, ns = a["points"].shape[1], a["scene"].shape[1]
         expect = {"object_id": (c,), "config_index": (c,), "points": (c, n, 3), "normals": (c, n, 3), "d_init": (c, n),
                   "d_goal": (c, n), "scene": (c, ns, 3), "centroid": (c, 3),
-                  "goal_transform": (c, 4, 4), "grasp_config": (g,), "grasp_prior_index": (g,), "grasp": (g, 51),
+                  "goal_transform": (c, 4, 4), "grasp_config": (g,), "grasp_prior_index": (g,), "grasp": (g, GRASP_DIM),
                   "contact": (g, n)}
         for name, shape in expect.items():
             if a[name].shape != shape:
@@ -163,13 +164,13 @@ class MapDataset:
     configuration (``per="config"``, testing).
 
     Items are dicts of float32 numpy arrays: ``points`` (N, 3), ``normals`` (N, 3), ``d_init``, ``d_goal``
-    (N,), ``goal_transform`` (4, 4, network frame), ``object_id``, ``config_index``, ``shard`` and ``row``
+    (N,), ``scene`` (Ns, 3), ``goal_transform`` (4, 4, network frame), ``object_id``, ``config_index``, ``shard`` and ``row``
     (ints), plus ``grasp`` (51,) and ``contact`` (N,) per grasp. With ``rotation`` other than ``"none"``
-    the sample is turned about the origin by a random rotation R: points, normals and the goal transform
-    (``R T R^-1``), and the grasp vector through :func:`tohgs.grasps.expand.transform_grasp` (its
+    the sample is turned about the origin by a random rotation R: points, normals, the scene and the goal transform
+    (``R T R^-1``), and the grasp vector through :func:`tohgs.geometry.grasp.transform_grasp` (its
     translation corrected through the wrist offset). :meth:`item` ``(i, draw)`` draws R from ``(seed, draw,
     i)``: training passes its step as ``draw``, so every step sees new rotations and a run is still
-    reproducible; ``dataset[i]`` is draw 0.
+    reproducible; ``dataset[i]`` is draw 0. :meth:`tohgs.data.batch.Batch.collate` stacks items.
     """
 
     def __init__(self, paths: list[str | Path], per: str = "grasp", rotation: str = "none", seed: int = 0):
@@ -194,7 +195,7 @@ class MapDataset:
         c = int(sh.grasp_config[row]) if self.per == "grasp" else row
         item: dict[str, Any] = {
             "points": sh.points[c].astype(np.float32), "normals": sh.normals[c].astype(np.float32),
-            "d_init": sh.d_init[c], "d_goal": sh.d_goal[c],
+            "d_init": sh.d_init[c], "d_goal": sh.d_goal[c], "scene": sh.scene[c],
             "goal_transform": network_goal_transform(sh.goal_transform[c], sh.centroid[c]).astype(np.float32),
             "object_id": int(sh.object_id[c]), "config_index": int(sh.config_index[c]), "shard": s, "row": row}
         if self.per == "grasp":
@@ -204,11 +205,12 @@ class MapDataset:
             R = random_rotation(np.random.default_rng([self.seed, int(draw), i]), self.rotation)
             item["points"] = (item["points"] @ R.T).astype(np.float32)
             item["normals"] = (item["normals"] @ R.T).astype(np.float32)
+            item["scene"] = (item["scene"] @ R.T).astype(np.float32)
             T = np.eye(4)
             T[:3, :3] = R
             item["goal_transform"] = (T @ item["goal_transform"] @ T.T).astype(np.float32)
             if "grasp" in item:
-                from tohgs.grasps.expand import transform_grasp
+                from tohgs.geometry.grasp import transform_grasp
 
                 item["grasp"] = transform_grasp(item["grasp"][None], T, np.asarray(sh.attrs["hand_wrist"]))[0].astype(np.float32)
         return item

@@ -3,7 +3,7 @@ manifest, and a validating open that names the store and the problem.
 
 Each store module (:mod:`tohgs.data.scenes`, :mod:`tohgs.data.grasps`, :mod:`tohgs.data.task_grasps`,
 :mod:`tohgs.data.maps`, :mod:`tohgs.data.predictions`) defines its arrays and checks their shapes; this
-module writes and reads them.
+module writes and reads them. A store of fixed arrays declares them once as a :class:`StoreLayout`.
 
 **The manifest.** Zarr reads a chunk file that is missing (deleted, or a shard file cut to nothing) as the
 array's fill value, silently. So every store records, as the last step inside its atomic write, a manifest
@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import hashlib
 import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -128,3 +130,37 @@ def read_store(path: str | Path, schema: str, version: int, names: list[str] | N
                              "missing or damaged (Zarr reads a missing chunk as fill values); rebuild the store")
         arrays[name] = data
     return arrays, {k: v for k, v in attrs.items() if k not in _RESERVED}
+
+
+def check_shapes(arrays: dict[str, np.ndarray], expect: dict[str, tuple[int, ...]], source: str) -> None:
+    """Every array named in ``expect`` has that shape; ``ValueError`` names ``source``, the array and both shapes."""
+    for name, shape in expect.items():
+        if arrays[name].shape != tuple(shape):
+            raise ValueError(f"{source}: array '{name}' has shape {arrays[name].shape}, expected {tuple(shape)}")
+
+
+@dataclass(frozen=True)
+class StoreLayout:
+    """A kind of store with fixed arrays: ``arrays`` maps each name to its ``(dimension_names, dtype)``;
+    ``check(arrays, source)`` validates their shapes and values (raising ``ValueError``); ``kind`` names the
+    store in messages. :meth:`write` casts, checks and writes; :meth:`read` reads and checks."""
+
+    schema: str
+    version: int
+    kind: str
+    arrays: dict[str, tuple[tuple[str, ...], Any]]
+    check: Callable[[dict[str, np.ndarray], str], None]
+    shard_rows: int | None = None
+
+    def write(self, arrays: dict[str, np.ndarray], attrs: dict[str, Any], path: str | Path) -> None:
+        """Write the store's arrays (cast to their dtypes) and ``attrs`` to ``path``, atomically."""
+        cast = {k: np.asarray(arrays[k], dtype=dt) for k, (_, dt) in self.arrays.items()}
+        self.check(cast, str(path))
+        write_store(path, {k: (cast[k], dims) for k, (dims, _) in self.arrays.items()}, attrs, self.schema,
+                    self.version, shard_rows=self.shard_rows)
+
+    def read(self, path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """Open and validate the store: ``(arrays, attrs)``; ``ValueError`` names the store and the problem."""
+        arrays, attrs = read_store(path, self.schema, self.version, list(self.arrays), self.kind)
+        self.check(arrays, str(path))
+        return arrays, attrs

@@ -17,12 +17,11 @@ Root attributes: ``schema``, ``schema_version``, ``manifest`` (:mod:`tohgs.data.
 
 from __future__ import annotations
 
-from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from tohgs.data.store import read_store, write_store
+from tohgs.data.store import StoreLayout, check_shapes
+from tohgs.geometry.grasp import GRASP_DIM
 
 SCHEMA = "tohgs.task_grasps"
 SCHEMA_VERSION = 1
@@ -33,9 +32,8 @@ _ARRAYS = {"config": (("grasp",), np.int32), "prior_index": (("grasp",), np.int3
 
 def _validate(arrays: dict[str, np.ndarray], source: str) -> None:
     k = len(arrays["config"])
-    for name, shape in {"config": (k,), "prior_index": (k,), "grasp_init": (k, 51), "grasp_goal": (k, 51)}.items():
-        if arrays[name].shape != shape:
-            raise ValueError(f"{source}: array '{name}' has shape {arrays[name].shape}, expected {shape}")
+    check_shapes(arrays, {"config": (k,), "prior_index": (k,), "grasp_init": (k, GRASP_DIM), "grasp_goal": (k, GRASP_DIM)},
+                 source)
     kept = arrays["kept_per_config"]
     if kept.ndim != 1 or kept.sum() != k:
         raise ValueError(f"{source}: kept_per_config does not add up to the {k} grasps")
@@ -43,15 +41,6 @@ def _validate(arrays: dict[str, np.ndarray], source: str) -> None:
         raise ValueError(f"{source}: config index out of range 0..{len(kept) - 1}")
 
 
-def write_task_grasps(arrays: dict[str, np.ndarray], attrs: dict[str, Any], path: str | Path) -> None:
-    """Write the arrays of :func:`tohgs.grasps.expand.expand_configurations` as a store, atomically."""
-    arrays = {k: np.asarray(arrays[k], dtype=dt) for k, (_, dt) in _ARRAYS.items()}
-    _validate(arrays, str(path))
-    write_store(path, {k: (arrays[k], dims) for k, (dims, _) in _ARRAYS.items()}, attrs, SCHEMA, SCHEMA_VERSION)
-
-
-def read_task_grasps(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """Open and validate a task-grasp store: ``(arrays, attrs)``; ``ValueError`` names the store."""
-    arrays, attrs = read_store(path, SCHEMA, SCHEMA_VERSION, list(_ARRAYS), "task-grasp store")
-    _validate(arrays, str(path))
-    return arrays, attrs
+LAYOUT = StoreLayout(SCHEMA, SCHEMA_VERSION, "task-grasp store", _ARRAYS, _validate)
+write_task_grasps = LAYOUT.write  # (arrays, attrs, path): cast, check and write the store atomically
+read_task_grasps = LAYOUT.read  # (path) -> (arrays, attrs), checked; ValueError names the store and the problem

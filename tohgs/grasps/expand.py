@@ -18,89 +18,12 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
-from scipy.spatial.transform import Rotation
 
+from tohgs.geometry.grasp import pose_matrix, transform_grasp
+from tohgs.geometry.scene import SceneCollider, collision_free, scene_meshes
 from tohgs.hand.assets import HandAssets
 
 log = logging.getLogger(__name__)
-
-
-def pose_matrix(pose: np.ndarray) -> np.ndarray:
-    """(4, 4) homogeneous matrix of a ``[x, y, z, qx, qy, qz, qw]`` pose (metres, scipy's xyzw quaternion)."""
-    pose = np.asarray(pose, dtype=np.float64)
-    T = np.eye(4)
-    T[:3, :3] = Rotation.from_quat(pose[3:]).as_matrix()
-    T[:3, 3] = pose[:3]
-    return T
-
-
-def transform_grasp(grasp: np.ndarray, T: np.ndarray, wrist: np.ndarray) -> np.ndarray:
-    """The grasp vectors of hands moved rigidly by ``T``.
-
-    The hand model turns its global rotation ``R_g`` about the rest wrist joint ``j0`` and then translates
-    by ``t``: ``v = R_g (x - j0) + j0 + t``. Moving it by ``(R, p)`` gives ``R R_g`` and
-    ``t' = R (j0 + t) + p - j0``; the 45 finger numbers do not change.
-
-    Args:
-        grasp: (B, 51) grasp vectors (translation m, axis-angles rad).
-        T: (4, 4) rigid transform.
-        wrist: (3,) the hand's rest wrist joint ``j0`` (``hand.rest_joints[0]``), m.
-
-    Returns:
-        (B, 51) grasp vectors in the new frame.
-    """
-    g = np.array(grasp, dtype=np.float64, copy=True).reshape(-1, 51)
-    R, p = np.asarray(T, dtype=np.float64)[:3, :3], np.asarray(T, dtype=np.float64)[:3, 3]
-    j0 = np.asarray(wrist, dtype=np.float64)
-    g[:, 3:6] = (Rotation.from_matrix(R) * Rotation.from_rotvec(g[:, 3:6])).as_rotvec()
-    g[:, :3] = (j0 + g[:, :3]) @ R.T + p - j0
-    return g
-
-
-def scene_meshes(scenes, c: int, objects_dir: str | Path, supports: dict, meshes: dict[str, trimesh.Trimesh] | None = None
-                 ) -> list[trimesh.Trimesh]:
-    """World-frame meshes of configuration ``c``'s scene without the target: the support (table or shelf),
-    the base brick (Stacking) and the obstacles. ``meshes`` caches object meshes by name."""
-    cache = {} if meshes is None else meshes
-
-    def obj(name: str) -> trimesh.Trimesh:
-        if name not in cache:
-            cache[name] = trimesh.load(Path(objects_dir) / name / "mesh.obj", force="mesh", process=False)
-        return cache[name]
-
-    sname, spose = scenes.support(c)
-    skey = f"support:{sname}"
-    if skey not in cache:
-        cache[skey] = supports[sname].mesh()
-    out = [cache[skey].copy().apply_transform(pose_matrix(spose))]
-    base = scenes.base(c)
-    if base is not None:
-        out.append(obj(base[0]).copy().apply_transform(pose_matrix(base[1])))
-    for oname, opose in scenes.obstacles(c):
-        out.append(obj(oname).copy().apply_transform(pose_matrix(opose)))
-    return out
-
-
-class SceneCollider:
-    """Occupancy and depth queries against a set of closed world-frame meshes (open3d ray casting)."""
-
-    def __init__(self, meshes: list[trimesh.Trimesh]):
-        from tohgs.geometry.raycast import raycasting_scene
-
-        merged = trimesh.util.concatenate(meshes)
-        self.scene = raycasting_scene(merged.vertices, merged.faces)
-
-    def depth_inside(self, points: np.ndarray) -> np.ndarray:
-        """(N,) how deep each of (N, 3) points lies inside the meshes (0 outside), m."""
-        import open3d as o3d
-
-        pts = o3d.core.Tensor(np.ascontiguousarray(points, dtype=np.float32))
-        inside = self.scene.compute_occupancy(pts).numpy() > 0.5
-        depth = np.zeros(len(points))
-        if inside.any():
-            sub = o3d.core.Tensor(np.ascontiguousarray(np.asarray(points)[inside], dtype=np.float32))
-            depth[inside] = self.scene.compute_distance(sub).numpy()
-        return depth
 
 
 @dataclass(frozen=True)
@@ -108,13 +31,6 @@ class ExpansionSettings:
     """``tolerance``: largest depth of a hand vertex inside a scene mesh that is not a collision, m."""
 
     tolerance: float = 0.002
-
-
-def collision_free(hand_vertices: np.ndarray, collider: SceneCollider, tolerance: float) -> np.ndarray:
-    """(B,) bool: hands ((B, V, 3) world frame) with no vertex deeper than ``tolerance`` in the scene."""
-    b, v, _ = hand_vertices.shape
-    depth = collider.depth_inside(hand_vertices.reshape(-1, 3)).reshape(b, v)
-    return depth.max(1) <= tolerance
 
 
 def expand_configurations(scenes, prior_pose: np.ndarray, hand: HandAssets, objects_dir: str | Path, supports: dict,

@@ -24,16 +24,17 @@ import numpy as np
 import torch
 import trimesh
 
+from tohgs.assets.mesh import object_mesh
 from tohgs.config import settings_from
 from tohgs.data.grasps import ENERGY_TERMS, PriorGrasps, write_prior_grasps
 from tohgs.geometry.sdf import SDFGrid
 from tohgs.grasps.filter import filter_prior_grasps, summarize_prior_grasps  # noqa: F401  (re-exported: the stage's other steps)
 from tohgs.grasps.synthesis import SynthesisSettings, rest_directions, synthesize
 from tohgs.hand.model import HandModel
+from tohgs.cache import load_or_compute
 from tohgs.io import content_key
 from tohgs.runtime import keep_freed_memory
-from tohgs.metrics.quality import (DisplacementSimulator, SDSettings, contact_distance, sd_gravity,
-                                   penetration_volume, surface_voxels)
+from tohgs.metrics.quality import DisplacementSimulator, SDSettings, hand_quality, surface_voxels
 
 log = logging.getLogger(__name__)
 
@@ -50,16 +51,8 @@ def object_sdf(mesh: trimesh.Trimesh, settings: SDFSettings, cache_dir: str | Pa
     """The SDF grid of ``mesh``, cached under ``<cache_dir>/sdf/<key>.npz`` (keyed by the mesh's vertices
     and faces and the settings)."""
     key = content_key(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64), asdict(settings))
-    path = Path(cache_dir) / "sdf" / f"{key}.npz" if cache_dir is not None else None
-    if path is not None and path.is_file():
-        try:
-            return SDFGrid.load(path)
-        except ValueError as exc:
-            log.warning("ignoring unreadable cache entry %s (%s)", path, exc)
-    grid = SDFGrid.build(mesh, settings.spacing, settings.padding)
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        grid.save(path)
+    grid, _ = load_or_compute(cache_dir, "sdf", key, ".npz", lambda: SDFGrid.build(mesh, settings.spacing, settings.padding),
+                              lambda g, path: g.save(path), SDFGrid.load)
     return grid
 
 
@@ -72,24 +65,15 @@ def evaluate_grasps(hand: HandModel, pose: np.ndarray, mesh: trimesh.Trimesh, co
                     sd_settings: SDSettings, voxel_pitch: float = 0.001, progress: bool = False,
                     cache_dir: str | Path | None = None) -> dict[str, np.ndarray]:
     """PV (m^3), SD (m) and contact distance (m) of (B, 51) grasps of one object in its mesh frame; SD's
-    gravity per grasp as ``sd_settings.gravity_direction`` says (:func:`palm_gravity` by default); the
+    gravity per grasp as ``sd_settings.gravity_direction`` says (:func:`tohgs.metrics.quality.palm_gravity` by default); the
     object's surface voxels are cached under ``cache_dir``."""
     with torch.no_grad():
         verts = hand(torch.as_tensor(pose, dtype=hand.rest_vertices.dtype)).vertices.cpu().numpy().astype(np.float64)
     faces = hand.closed_faces.cpu().numpy()
-    pv = penetration_volume(verts, faces, surface_voxels(mesh, voxel_pitch, cache_dir), voxel_pitch)
-    cd = contact_distance(verts, mesh)
-    it = range(len(verts))
-    if progress:
-        from tqdm import tqdm
-
-        it = tqdm(it, desc="SD", mininterval=5.0)
     centre = np.asarray(mesh.vertices).mean(0)
-    palm = verts[:, hand.assets.palm_ids].mean(1)  # the palm centre
-    gravity = sd_gravity(sd_settings, palm, centre)
     with DisplacementSimulator(collision_obj, centre, sd_settings) as sim:
-        sd = np.array([sim.displacement(verts[i], faces, gravity=gravity[i]) for i in it])
-    return {"pv": np.atleast_1d(pv), "sd": sd, "contact_distance": np.atleast_1d(cd)}
+        return hand_quality(verts, faces, hand.assets.palm_ids, mesh, surface_voxels(mesh, voxel_pitch, cache_dir), sim,
+                            voxel_pitch, progress=progress)
 
 
 def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, synthesis: dict[str, Any],
@@ -113,11 +97,8 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
     keep_freed_memory()  # the optimiser's megabyte tensors would otherwise page-fault in every step
     object_dir = Path(object_dir)
     name = object_dir.name
+    mesh = object_mesh(object_dir.parent, name)
     mesh_path = object_dir / "mesh.obj"
-    try:
-        mesh = trimesh.load(mesh_path, force="mesh", process=False)  # as written: merging would break seams
-    except Exception as exc:
-        raise ValueError(f"{mesh_path}: unreadable object mesh ({exc})") from exc
     if not mesh.is_watertight:
         raise ValueError(f"{mesh_path}: the object mesh is not watertight (SDF and PV need a closed surface)")
     s_syn = settings_from(SynthesisSettings, {**synthesis, "plane_direction": plane_direction})

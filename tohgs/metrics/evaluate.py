@@ -27,13 +27,13 @@ import numpy as np
 import pandas as pd
 import trimesh
 
+from tohgs.assets.mesh import object_mesh
 from tohgs.config import settings_from
 from tohgs.data.predictions import read_predictions
 from tohgs.data.scenes import read_scenes
-from tohgs.grasps.expand import SceneCollider, pose_matrix, scene_meshes
+from tohgs.geometry.scene import SceneCollider, scene_meshes
 from tohgs.hand.assets import HandAssets
-from tohgs.metrics.quality import (DisplacementSimulator, SDSettings, contact_distance, penetration_volume,
-                                   sd_gravity, surface_voxels)
+from tohgs.metrics.quality import DisplacementSimulator, SDSettings, hand_quality, surface_voxels
 
 log = logging.getLogger(__name__)
 
@@ -68,20 +68,17 @@ class _ObjectAssets:
 def _object_assets(objects_dir: Path, name: str, pitch: float, cache: dict, cache_dir: str | Path | None = None
                    ) -> _ObjectAssets:
     if name not in cache:
-        path = objects_dir / name / "mesh.obj"
-        try:
-            mesh = trimesh.load(path, force="mesh", process=False)
-        except Exception as exc:
-            raise ValueError(f"{path}: unreadable object mesh ({exc})") from exc
+        mesh = object_mesh(objects_dir, name)
         cache[name] = _ObjectAssets(mesh, surface_voxels(mesh, pitch, cache_dir), objects_dir / name / "collision.obj",
                                     np.asarray(mesh.vertices).mean(0))
     return cache[name]
 
 
 def grasp_metrics(verts_init: np.ndarray, verts_goal: np.ndarray, faces: np.ndarray, palm_ids: np.ndarray,
-                  obj: _ObjectAssets, target_pose: np.ndarray, collider: SceneCollider, sd: SDSettings,
-                  pitch: float, sim: DisplacementSimulator) -> dict[str, np.ndarray]:
-    """PV, SD, contact distance and both OPPs of S hands of one configuration.
+                  obj: _ObjectAssets, target_pose: np.ndarray, collider: SceneCollider, pitch: float,
+                  sim: DisplacementSimulator) -> dict[str, np.ndarray]:
+    """PV, SD, contact distance (:func:`tohgs.metrics.quality.hand_quality`) and both OPPs of S hands of one
+    configuration.
 
     Args:
         verts_init, verts_goal: (S, V, 3) world-frame hand vertices at the initial / goal pose, m.
@@ -90,20 +87,11 @@ def grasp_metrics(verts_init: np.ndarray, verts_goal: np.ndarray, faces: np.ndar
         obj: the target's mesh, surface voxels, collision file and vertex mean (mesh frame).
         target_pose: the target's initial ``[x, y, z, qx, qy, qz, qw]`` pose.
         collider: the scene without the target.
-        sd, pitch: the SD protocol and the PV voxel size.
-        sim: a simulator loaded with the target's collision shape.
+        pitch: the PV voxel size.
+        sim: a simulator of the target (its collision shape and the SD protocol).
     """
-    T = pose_matrix(target_pose)
-    # PV and the contact distance in the object's mesh frame (the voxels are cached there)
-    local = (verts_init - T[:3, 3]) @ T[:3, :3]
-    pv = np.atleast_1d(penetration_volume(local, faces, obj.voxels, pitch))
-    cd = np.atleast_1d(contact_distance(local, obj.mesh))
-    centre = T[:3, :3] @ obj.vertex_mean + T[:3, 3]
-    gravity = sd_gravity(sd, verts_init[:, palm_ids].mean(1), centre)
-    sds = np.array([sim.displacement(v, faces, object_pose=np.asarray(target_pose, dtype=np.float64), gravity=g)
-                    for v, g in zip(verts_init, gravity)])
-    return {"pv": pv, "sd": sds, "contact_distance": cd, "init_opp": occupied_fraction(verts_init, collider),
-            "goal_opp": occupied_fraction(verts_goal, collider)}
+    m = hand_quality(verts_init, faces, palm_ids, obj.mesh, obj.voxels, sim, pitch, target_pose)
+    return {**m, "init_opp": occupied_fraction(verts_init, collider), "goal_opp": occupied_fraction(verts_goal, collider)}
 
 
 def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | Path], objects_dir: str | Path,
@@ -159,7 +147,7 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
             collider = SceneCollider(scene_meshes(sc, c, objects_dir, supports, meshes))
             v_init = hand.vertices(arrays["grasp_init"][i])
             v_goal = hand.vertices(arrays["grasp_goal"][i])
-            m = grasp_metrics(v_init, v_goal, faces, hand.palm_ids, obj, sc.target_init_pose[c], collider, s_sd,
+            m = grasp_metrics(v_init, v_goal, faces, hand.palm_ids, obj, sc.target_init_pose[c], collider,
                               voxel_pitch, sims[name])
             ds = diversity(v_init)
             for k in range(len(v_init)):

@@ -26,8 +26,10 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from tohgs.cache import load_or_compute
+from tohgs.geometry.grasp import pose_matrix
 from tohgs.geometry.raycast import exact_signed_distance, occupancy
-from tohgs.io import atomic_path, content_key
+from tohgs.io import content_key
 
 log = logging.getLogger(__name__)
 
@@ -39,19 +41,15 @@ def surface_voxels(mesh: trimesh.Trimesh, pitch: float = VOXEL_PITCH, cache_dir:
     ``voxelized`` returns them. That takes seconds per object, so with ``cache_dir`` they are kept under
     ``<cache_dir>/voxels/<key>.npy`` (keyed by the mesh's vertices and faces and the pitch): the prior-grasp
     and evaluation jobs of an object share them; an unreadable entry is recomputed and replaced."""
-    path = None
-    if cache_dir is not None:
-        key = content_key(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64), float(pitch))
-        path = Path(cache_dir) / "voxels" / f"{key}.npy"
-        if path.is_file():
-            try:
-                return np.load(path, allow_pickle=False)
-            except (OSError, ValueError) as exc:
-                log.warning("ignoring unreadable cache entry %s (%s)", path, exc)
-    voxels = np.asarray(mesh.voxelized(pitch).points, dtype=np.float64)
-    if path is not None:
-        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+    key = content_key(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64), float(pitch))
+
+    def save(voxels: np.ndarray, path: Path) -> None:
+        with open(path, "wb") as fh:
             np.save(fh, voxels)
+
+    voxels, _ = load_or_compute(cache_dir, "voxels", key, ".npy",
+                                lambda: np.asarray(mesh.voxelized(pitch).points, dtype=np.float64), save,
+                                lambda path: np.load(path, allow_pickle=False))
     return voxels
 
 
@@ -148,14 +146,13 @@ class DisplacementSimulator:
     settings: SDSettings = field(default_factory=SDSettings)
 
     def __post_init__(self) -> None:
-        import pybullet as pb
+        from tohgs.sim.client import DirectClient
 
-        self._pb = pb
-        self.cid = pb.connect(pb.DIRECT)
+        self._client = DirectClient()
+        self._pb, self.cid = self._client._pb, self._client.cid
 
     def close(self) -> None:
-        if self.cid is not None and self._pb.isConnected(self.cid):
-            self._pb.disconnect(self.cid)
+        self._client.close()
         self.cid = None
 
     def __enter__(self) -> "DisplacementSimulator":
@@ -177,10 +174,7 @@ class DisplacementSimulator:
         pb, s, cid = self._pb, self.settings, self.cid
         g = np.asarray(s.gravity if gravity is None else gravity, dtype=np.float64)
         try:
-            pb.resetSimulation(physicsClientId=cid)
-            pb.setGravity(*g.tolist(), physicsClientId=cid)
-            pb.setTimeStep(s.time_step, physicsClientId=cid)
-            pb.setPhysicsEngineParameter(numSolverIterations=s.solver_iterations, physicsClientId=cid)
+            self._client.reset_simulation(g.tolist(), s.time_step, s.solver_iterations)
             hand_col = pb.createCollisionShape(pb.GEOM_MESH, vertices=np.asarray(hand_vertices, dtype=np.float64).tolist(),
                                                indices=np.asarray(hand_faces, dtype=np.int64).ravel().tolist(),
                                                flags=pb.GEOM_FORCE_CONCAVE_TRIMESH, physicsClientId=cid)
@@ -201,3 +195,36 @@ class DisplacementSimulator:
             return d if np.isfinite(d) else s.failed_displacement
         except pb.error:
             return s.failed_displacement
+
+
+IDENTITY_POSE = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])  # [x, y, z, qx, qy, qz, qw]
+
+
+def hand_quality(hand_vertices: np.ndarray, faces: np.ndarray, palm_ids: np.ndarray, mesh: trimesh.Trimesh,
+                 voxels: np.ndarray, sim: DisplacementSimulator, pitch: float = VOXEL_PITCH,
+                 object_pose: np.ndarray | None = None, progress: bool = False) -> dict[str, np.ndarray]:
+    """PV (m^3), SD (m) and the contact distance (m) of S hands around one object: the one protocol the
+    prior grasps and the evaluation share.
+
+    Args:
+        hand_vertices: (S, V, 3) hands in the frame the object stands at ``object_pose`` in, m.
+        faces: (F, 3) the hand's closed faces.
+        palm_ids: the palm's vertex ids (SD's ``away_from_palm`` gravity pulls from the palm centre).
+        mesh: the object's mesh (its own frame); ``voxels``: its surface voxels (:func:`surface_voxels`).
+        sim: a simulator of the object (its collision parts and vertex mean), with the SD settings.
+        object_pose: the object's ``[x, y, z, qx, qy, qz, qw]`` pose (default: its own frame).
+    """
+    pose = IDENTITY_POSE if object_pose is None else np.asarray(object_pose, dtype=np.float64)
+    T = pose_matrix(pose)
+    local = (hand_vertices - T[:3, 3]) @ T[:3, :3]  # PV and the contact distance in the mesh frame
+    pv = np.atleast_1d(penetration_volume(local, faces, voxels, pitch))
+    cd = np.atleast_1d(contact_distance(local, mesh))
+    centre = T[:3, :3] @ np.asarray(sim.vertex_mean, dtype=np.float64) + T[:3, 3]
+    gravity = sd_gravity(sim.settings, hand_vertices[:, palm_ids].mean(1), centre)
+    it = range(len(hand_vertices))
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(it, desc="SD", mininterval=5.0)
+    sd = np.array([sim.displacement(hand_vertices[i], faces, object_pose=pose, gravity=gravity[i]) for i in it])
+    return {"pv": pv, "sd": sd, "contact_distance": cd}

@@ -1,6 +1,9 @@
-"""The paper's Table 1 from per-grasp metric rows (:mod:`tohgs.metrics.evaluate`), and the QR grid.
+"""The tables (the paper's Tables 1, 2, 4 and 5) from per-grasp metric rows (:mod:`tohgs.metrics.evaluate`),
+and the QR grid.
 
-Columns of ``table1.csv`` (one row per task and method, the methods in the config's order):
+A table is a config block (``tables.<name>``: its ``rows``, methods, and its ``columns``); every table has
+one row per task and method, the methods in the block's order, labelled with their ``label``. Its columns
+are ``task``, ``method`` and those the block lists, of these (:data:`METRIC_COLUMNS`):
 
 =============  =================================================================================
 column         meaning
@@ -26,9 +29,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-METHOD_LABELS = {"dataset": "Dataset", "ours": "Ours", "ours-gt-contact": "Ours (GT contact)"}
-TABLE1_COLUMNS = ("task", "method", "pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "init_opp",
-                  "goal_opp", "ts", "grasps", "configs")
+METRIC_COLUMNS = ("pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "init_opp", "goal_opp", "ts", "grasps",
+                  "configs")
 _HEADERS = {"task": "Task", "method": "Method", "pv_avg": "PV avg (cm³)", "pv_std": "PV std", "sd_avg": "SD avg (cm)",
             "sd_std": "SD std", "cr": "CR %", "qr": "QR %", "ds": "DS", "init_opp": "Init OPP %",
             "goal_opp": "Goal OPP %", "ts": "TS", "grasps": "grasps", "configs": "configs"}
@@ -50,10 +52,10 @@ def quality_ratio(frame: pd.DataFrame, t: QualityThresholds) -> float:
 
 
 def summarize(frame: pd.DataFrame, t: QualityThresholds) -> dict[str, float]:
-    """The Table 1 numbers of one task and method's rows (NaN where there are none)."""
+    """Every metric column of one task and method's rows (NaN where there are none)."""
     n = len(frame)
     if n == 0:
-        out = {k: float("nan") for k in TABLE1_COLUMNS[2:]}
+        out = {k: float("nan") for k in METRIC_COLUMNS}
         out.update(grasps=0, configs=0)
         return out
     qr = quality_ratio(frame, t)
@@ -80,18 +82,23 @@ def read_metrics(paths: list[str | Path]) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=list(COLUMNS))
 
 
-def table1(rows: pd.DataFrame, tasks: list[str], methods: list[str], t: QualityThresholds) -> pd.DataFrame:
-    """One row per task and method, in the given orders."""
+def metric_table(rows: pd.DataFrame, tasks: list[str], methods: list[str], labels: dict[str, str],
+                 columns: list[str], t: QualityThresholds) -> pd.DataFrame:
+    """One row per task and method, in the given orders: ``task``, ``method`` (its label) and ``columns``."""
+    unknown = [c for c in columns if c not in METRIC_COLUMNS]
+    if unknown:
+        raise ValueError(f"unknown table columns {unknown} (known: {', '.join(METRIC_COLUMNS)})")
     out = []
     for task in tasks:
         for m in methods:
             sel = rows[(rows.task == task) & (rows.method == m)]
-            out.append({"task": task, "method": METHOD_LABELS.get(m, m), **summarize(sel, t)})
-    return pd.DataFrame(out, columns=list(TABLE1_COLUMNS))
+            summary = summarize(sel, t)
+            out.append({"task": task, "method": labels.get(m, m), **{c: summary[c] for c in columns}})
+    return pd.DataFrame(out, columns=["task", "method", *columns])
 
 
-def qr_grid(rows: pd.DataFrame, tasks: list[str], methods: list[str], max_pv: list[float], max_sd: list[float]
-            ) -> pd.DataFrame:
+def qr_grid(rows: pd.DataFrame, tasks: list[str], methods: list[str], labels: dict[str, str], max_pv: list[float],
+            max_sd: list[float]) -> pd.DataFrame:
     """QR (%) for every PV x SD threshold pair (m^3, m; listed in cm^3 and cm), per task and method."""
     out = []
     for task in tasks:
@@ -99,13 +106,13 @@ def qr_grid(rows: pd.DataFrame, tasks: list[str], methods: list[str], max_pv: li
             sel = rows[(rows.task == task) & (rows.method == m)]
             for pv in max_pv:
                 for sd in max_sd:
-                    out.append({"task": task, "method": METHOD_LABELS.get(m, m), "max_pv_cm3": round(pv * 1e6, 6),
+                    out.append({"task": task, "method": labels.get(m, m), "max_pv_cm3": round(pv * 1e6, 6),
                                 "max_sd_cm": round(sd * 100, 6), "qr": quality_ratio(sel, QualityThresholds(pv, sd))})
     return pd.DataFrame(out, columns=["task", "method", "max_pv_cm3", "max_sd_cm", "qr"])
 
 
 def markdown(table: pd.DataFrame, digits: int = 3) -> str:
-    """A GitHub markdown table of :func:`table1`'s frame (NaN as an en dash)."""
+    """A GitHub markdown table of :func:`metric_table`'s frame (NaN as an en dash)."""
     cols = list(table.columns)
     lines = ["| " + " | ".join(_HEADERS.get(c, c) for c in cols) + " |", "|" + "---|" * len(cols)]
     for _, r in table.iterrows():

@@ -1,1 +1,2 @@
-"""Networks: PointNet++ and the two diffusers (ContactDiffuser, GraspDiffuser)."""
+"""Components, the trainable networks (:mod:`tohgs.models.component`): the diffusers, PointNet++, the one
+training loop and the one checkpoint format."""

@@ -27,8 +27,9 @@ from tohgs.data.maps import MapDataset
 from tohgs.hand.model import HandModel
 from tohgs.hand.rotations import axis_angle_to_matrix
 from tohgs.models.diffusion import NoiseSchedule, sample
+from tohgs.data.batch import Batch
+from tohgs.models.checkpoint import load_component
 from tohgs.models.grasp_diffuser import GraspCondition
-from tohgs.models.train import _collate, load_model
 
 log = logging.getLogger(__name__)
 
@@ -43,14 +44,14 @@ def _derangement(n: int, generator: torch.Generator) -> torch.Tensor:
 
 
 @torch.no_grad()
-def shuffled_condition_gap(name: str, model, data: MapDataset, n_samples: int = 256, seed: int = 0,
+def shuffled_condition_gap(model, data: MapDataset, n_samples: int = 256, seed: int = 0,
                            timesteps: tuple[int, ...] = (50, 200, 500, 800)) -> dict:
     """Denoising loss with the true and with shuffled conditions, per timestep and overall.
 
     Args:
-        name: ``"grasp_diffuser"`` (loss: L_diff, the summed squared error of the normalised grasp) or
-            ``"contact_diffuser"`` (the mean squared error of its target, the noise or the clean map).
-        model: the trained network (eval mode).
+        model: the trained network (eval mode): a GraspDiffuser (loss: L_diff, the summed squared error of
+            the normalised grasp) or a ContactDiffuser (the mean squared error of its target, the noise or
+            the clean map).
         data: training items (``per="grasp"``).
         n_samples: items drawn (with replacement, seeded).
         timesteps: the t at which both losses are measured (the same noise for both).
@@ -63,7 +64,7 @@ def shuffled_condition_gap(name: str, model, data: MapDataset, n_samples: int = 
     """
     g = torch.Generator().manual_seed(seed)
     idx = torch.randint(0, len(data), (n_samples,), generator=g).tolist()
-    batch = _collate([data[i] for i in idx], torch.device("cpu"))
+    batch = Batch.collate([data[i] for i in idx])
     configs = torch.as_tensor([data.index[i][0] * 1_000_000 + int(data.shards[data.index[i][0]].grasp_config[data.index[i][1]])
                                for i in idx])
     perm = _derangement(n_samples, g)
@@ -74,21 +75,20 @@ def shuffled_condition_gap(name: str, model, data: MapDataset, n_samples: int = 
         perm[same] = perm[same][torch.randperm(int(same.sum()), generator=g)]
         perm = torch.where(perm == torch.arange(n_samples), perm.roll(1), perm)
     sched = NoiseSchedule(model.diffusion)
-    shuffled = {k: v[perm] for k, v in batch.items() if k != "grasp"}
-    if name == "grasp_diffuser":
-        own = model.condition(batch["points"], batch["normals"], batch["contact"])
-        other = model.condition(shuffled["points"], shuffled["normals"], shuffled["contact"])
+    shuffled = batch.index(perm)
+    grasps = model.kind == "grasp_diffuser"
+    if grasps:
+        own = model.condition(batch.points, batch.normals, batch.contact)
+        other = model.condition(shuffled.points, shuffled.normals, shuffled.contact)
         # Each sample's own grasp under a condition: the training loss of a batch whose conditions were
         # shuffled. "context" keeps the sample's own frame and swaps only what the network reads.
         context = GraspCondition(other.glob, other.tokens, own.rotation, own.origin, own.points)
-        cases = {"true": (own, model.encode(batch["grasp"], own)),
-                 "shuffled": (other, model.encode(batch["grasp"], other)),
-                 "context": (context, model.encode(batch["grasp"], own))}
+        cases = {"true": (own, model.encode(batch.grasp, own)),
+                 "shuffled": (other, model.encode(batch.grasp, other)),
+                 "context": (context, model.encode(batch.grasp, own))}
     else:
-        x0 = 2 * batch["contact"] - 1
-        cases = {"true": (model.condition(batch["points"], batch["normals"], batch["d_init"], batch["d_goal"]), x0),
-                 "shuffled": (model.condition(shuffled["points"], shuffled["normals"], shuffled["d_init"],
-                                              shuffled["d_goal"]), x0)}
+        x0 = 2 * batch.contact - 1
+        cases = {"true": (model.batch_condition(batch), x0), "shuffled": (model.batch_condition(shuffled), x0)}
     out: dict = {k: {} for k in cases}
     for t in timesteps:
         tt = torch.full((n_samples,), t, dtype=torch.long)
@@ -96,7 +96,7 @@ def shuffled_condition_gap(name: str, model, data: MapDataset, n_samples: int = 
         for key, (cond, x0) in cases.items():
             x_t = sched.q_sample(x0, noise, tt)
             pred = model(x_t, tt, cond)
-            if name == "grasp_diffuser":
+            if grasps:
                 loss = ((pred - x0) ** 2).sum(-1).mean()
             else:  # the network's own target: the noise (epsilon) or the clean map (sample)
                 loss = ((pred - (noise if sched.cfg.prediction == "epsilon" else x0)) ** 2).mean()
@@ -229,20 +229,27 @@ def contact_fit(model, data: MapDataset, max_configs: int = 24, samples: int = 4
             "true_contact_fraction": float(np.mean(true_frac)) if true_frac else math.nan}
 
 
-def model_checks(task: str, shard_paths: list[str | Path], grasp_ckpt: str | Path, contact_ckpt: str | Path,
-                 hand: HandModel, out: str | Path, seed: int = 0) -> dict:
-    """Both measurements for a task's two trained diffusers on their training shards; written as JSON."""
+CHECKS = ("contact_diffuser", "grasp_diffuser")  # the component kinds these measurements apply to
+
+
+def model_checks(task: str, shard_paths: list[str | Path], checkpoints: dict[str, str | Path], hand: HandModel,
+                 out: str | Path, seed: int = 0) -> dict:
+    """Both measurements for each of a task's trained diffusers (``checkpoints``: by component name) on their
+    training shards; written as JSON, one entry per component (a kind without checks says so)."""
     from tohgs.io import write_json
 
     torch.set_num_threads(1)
     result: dict = {"task": task}
     plain = MapDataset(shard_paths, per="grasp", rotation="none")
-    for name, ckpt in (("grasp_diffuser", grasp_ckpt), ("contact_diffuser", contact_ckpt)):
-        model, meta = load_model(ckpt)
+    for name, ckpt in checkpoints.items():
+        model, meta = load_component(ckpt)
+        if model.kind not in CHECKS:
+            result[name] = {"kind": model.kind, "checks": "none for this kind"}
+            continue
         # the gap is measured on what the model was trained on: its own augmentation
-        seen = MapDataset(shard_paths, per="grasp", rotation=meta["train_settings"]["rotation"], seed=seed)
-        result[name] = {"shuffled_condition": shuffled_condition_gap(name, model, seen, seed=seed)}
-        if name == "grasp_diffuser":
+        seen = MapDataset(shard_paths, per="grasp", rotation=meta["training_config"]["rotation"], seed=seed)
+        result[name] = {"kind": model.kind, "shuffled_condition": shuffled_condition_gap(model, seen, seed=seed)}
+        if model.kind == "grasp_diffuser":
             result[name]["fit"] = grasp_fit(model, hand, plain, seed=seed)
         else:
             result[name]["fit"] = contact_fit(model, plain, seed=seed)

@@ -15,7 +15,9 @@ from dataclasses import asdict, dataclass, field
 import torch
 from torch import nn
 
-from tohgs.models.diffusion import DiffusionConfig, TimeMLP
+from tohgs.data.batch import Batch
+from tohgs.models.component import Component
+from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, TimeMLP, sample
 from tohgs.models.pointnet2 import PointNet2, PointNet2Config
 
 
@@ -52,13 +54,17 @@ class ResBlock(nn.Module):
         return x + self.net(x + cond)
 
 
-class ContactDiffuser(nn.Module):
-    """Epsilon-prediction network over per-point contact values."""
+class ContactDiffuser(Component):
+    """Epsilon-prediction network over per-point contact values (a contact source: :meth:`sample_contact`)."""
+
+    kind = "contact_diffuser"
+    Config = ContactDiffuserConfig
 
     def __init__(self, cfg: ContactDiffuserConfig):
         super().__init__()
         self.cfg = cfg
         self.diffusion = DiffusionConfig(**cfg.diffusion)
+        self.schedule = NoiseSchedule(self.diffusion)
         pcfg = PointNet2Config.from_dict({**cfg.pointnet, "in_channels": 5})
         self.backbone = PointNet2(pcfg)
         d = cfg.d_model
@@ -87,3 +93,29 @@ class ContactDiffuser(nn.Module):
             h = res(h, c)
             h = attn(h + c)
         return self.out(h)[..., 0]
+
+    def batch_condition(self, batch: Batch) -> torch.Tensor:
+        """:meth:`condition` of a batch's object cloud and distance maps."""
+        return self.condition(batch.points, batch.normals, batch.d_init, batch.d_goal)
+
+    def loss(self, batch: Batch, generator: torch.Generator) -> dict[str, torch.Tensor]:
+        """The denoising loss: the mean squared error of the network's target (the noise for ``epsilon``, the
+        clean map ``2 c - 1`` for ``sample``) at a uniform timestep per sample."""
+        dev = batch.device
+        t = torch.randint(0, self.schedule.timesteps, (batch.size,), generator=generator).to(dev)
+        x0 = 2 * batch.contact - 1
+        noise = torch.randn(x0.shape, generator=generator).to(dev)
+        x_t = self.schedule.q_sample(x0, noise, t)
+        target = noise if self.diffusion.prediction == "epsilon" else x0
+        return {"loss": nn.functional.mse_loss(self(x_t, t, self.batch_condition(batch)), target)}
+
+    @torch.no_grad()
+    def sample_contact(self, batch: Batch, sampler: str, steps: int, generator: torch.Generator) -> torch.Tensor:
+        """(B, N) contact maps in [0, 1] for the batch's scenes (one reverse process per sample)."""
+        cond = self.batch_condition(batch)
+        x = sample(lambda xt, tt: self(xt, tt, cond), tuple(batch.points.shape[:2]), self.diffusion, sampler, steps,
+                   generator, batch.device)
+        return (x.clamp(-1, 1) + 1) / 2
+
+
+COMPONENT = ContactDiffuser

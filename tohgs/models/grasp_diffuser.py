@@ -59,12 +59,14 @@ from dataclasses import asdict, dataclass, field
 import torch
 from torch import nn
 
+from tohgs.data.batch import Batch
+from tohgs.geometry.grasp import GRASP_DIM
 from tohgs.hand.model import HandModel
 from tohgs.hand.rotations import axis_angle_to_matrix, matrix_to_axis_angle
-from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, TimeMLP
+from tohgs.models.component import Component
+from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, TimeMLP, sample
 from tohgs.models.pointnet2 import PointNet, PointNet2, PointNet2Config
 
-GRASP_DIM = 51  # translation (3) + global axis-angle (3) + 15 joints x axis-angle (3)
 LOSS_WEIGHTS = {"placing": (15.0, 1.0, 5.0, 0.002), "shelving": (15.0, 1.0, 5.0, 0.002),
                 "stacking": (10.0, 1.0, 3.0, 0.005)}
 PAPER_POINTS = 2048  # the point sums of L_pen and L_cons are scaled to this many points
@@ -190,7 +192,7 @@ def grasp_to_frame(grasp: torch.Tensor, rotation: torch.Tensor, origin: torch.Te
     """(B, 51) grasps of the network frame expressed in frames (rotation (B, 3, 3), origin (B, 3)).
 
     The hand model turns its global rotation about the rest wrist ``wrist`` (3,) and then translates by t
-    (:func:`tohgs.grasps.expand.transform_grasp`), so in a frame ``x' = R^T (x - o)`` the rotation is
+    (:func:`tohgs.geometry.grasp.transform_grasp`), so in a frame ``x' = R^T (x - o)`` the rotation is
     ``R^T R_g`` and the translation ``R^T (j0 + t - o) - j0``; the finger numbers do not change.
     """
     rt = rotation.transpose(-1, -2)
@@ -224,14 +226,20 @@ class _Block(nn.Module):
         return h
 
 
-class GraspDiffuser(nn.Module):
-    """x0-prediction network over normalised grasps; holds the grasp normaliser and the hand's rest wrist
-    as buffers (both set from the training data)."""
+class GraspDiffuser(Component):
+    """x0-prediction network over normalised grasps (a grasp generator: :meth:`sample_grasps`); holds the
+    grasp normaliser and the hand's rest wrist as buffers (both set from the training data)."""
+
+    kind = "grasp_diffuser"
+    Config = GraspDiffuserConfig
+    needs_hand = True
 
     def __init__(self, cfg: GraspDiffuserConfig):
         super().__init__()
         self.cfg = cfg
         self.diffusion = DiffusionConfig(**cfg.diffusion)
+        self.schedule = NoiseSchedule(self.diffusion)
+        self._training = {}  # what prepare() sets for the loss: the hand (not a submodule), weights, alpha
         if cfg.encoder == "pointnet2":
             self.backbone = PointNet2(PointNet2Config.from_dict({**cfg.pointnet, "in_channels": 4}))
         else:
@@ -266,6 +274,55 @@ class GraspDiffuser(nn.Module):
         self.grasp_mean.copy_(grasps.mean(0))
         std = grasps.std(0) if grasps.shape[0] > 1 else torch.zeros_like(grasps[0])
         self.grasp_std.copy_(std.clamp_min(1e-3))
+
+    def normaliser(self) -> dict[str, torch.Tensor]:
+        """The grasp normaliser (per-dimension ``mean`` and ``std`` of the network's vectors)."""
+        return {"mean": self.grasp_mean.detach().cpu().clone(), "std": self.grasp_std.detach().cpu().clone()}
+
+    def prepare(self, data, task: str, hand: HandModel | None = None) -> None:
+        """Before training: the hand (its rest wrist and palm; the losses pose it), the normaliser of the
+        training grasps as the network sees them (:func:`seen_grasps`), the task's loss weights and the
+        shards' contact alpha."""
+        if hand is None:
+            raise ValueError("GraspDiffuser trains with the hand model in the loss; pass hand=")
+        self.set_hand(hand)
+        self.set_normaliser(seen_grasps(self, data, self.wrist.device))
+        self._training = {"hand": hand, "weights": LOSS_WEIGHTS.get(task, LOSS_WEIGHTS["placing"]),
+                          "alpha_contact": float(data.shards[0].attrs.get("alpha_contact", 100.0))}
+
+    def loss(self, batch: Batch, generator: torch.Generator) -> dict[str, torch.Tensor]:
+        """The weighted sum of the four terms (module docstring) at a uniform timestep per sample, with each
+        term's mean and weighted contribution (``w_<term>``) for the log."""
+        if not self._training:
+            raise ValueError("GraspDiffuser.loss needs prepare() first (the hand and the normaliser)")
+        b, dev = batch.size, batch.device
+        t = torch.randint(0, self.schedule.timesteps, (b,), generator=generator).to(dev)
+        cond = self.condition(batch.points, batch.normals, batch.contact)
+        x0 = self.encode(batch.grasp, cond)
+        noise = torch.randn(x0.shape, generator=generator).to(dev)
+        x_t = self.schedule.q_sample(x0, noise, t)
+        if self.cfg.cond_dropout > 0:
+            drop = (torch.rand(b, generator=generator) < self.cfg.cond_dropout).to(dev)
+            x0_hat = self(x_t, t, self.drop_context(cond, drop))
+        else:
+            x0_hat = self(x_t, t, cond)
+        terms = grasp_losses(self, self._training["hand"], x0_hat, x0, cond, batch.contact,
+                             self._training["alpha_contact"])
+        weighted = weighted_terms(terms, self._training["weights"])
+        return {"loss": sum(weighted.values()), **{k: v.mean() for k, v in terms.items()},
+                **{f"w_{k}": v for k, v in weighted.items()}}
+
+    @torch.no_grad()
+    def sample_grasps(self, batch: Batch, sampler: str, steps: int, generator: torch.Generator,
+                      guidance: float = 1.0) -> torch.Tensor:
+        """(B, 51) grasps in the network frame for the batch's objects and contact maps (``batch.contact``),
+        with classifier-free ``guidance`` (1: none)."""
+        if batch.contact is None:
+            raise ValueError("GraspDiffuser samples grasps for contact maps; the batch has none")
+        cond = self.condition(batch.points, batch.normals, batch.contact)
+        x0 = sample(lambda xt, tt: self.guided(xt, tt, cond, guidance), (batch.size, self.dim), self.diffusion,
+                    sampler, steps, generator, batch.device)
+        return self.decode(x0, cond)
 
     def set_hand(self, hand: HandModel) -> None:
         """The hand's rest wrist joint (grasps turn about it: the contact frame needs it) and its rest palm
@@ -436,6 +493,21 @@ def weighted_terms(terms: dict[str, torch.Tensor], weights: tuple[float, float, 
             "pen": w_pen * terms["pen"].clamp(max=1.0).mean(), "cons": w_cons * terms["cons"].mean()}
 
 
-def total_loss(terms: dict[str, torch.Tensor], weights: tuple[float, float, float, float]) -> torch.Tensor:
-    """The sum of :func:`weighted_terms`."""
-    return sum(weighted_terms(terms, weights).values())
+def seen_grasps(model: GraspDiffuser, data, device: torch.device, min_samples: int = 4096, max_draws: int = 8
+                ) -> torch.Tensor:
+    """(G', D) the training grasps as the network sees them: augmented as in training (draws 0, 1, ...
+    of every item of the :class:`tohgs.data.maps.MapDataset` ``data``, until ``min_samples`` or
+    ``max_draws``) and in the network's frame. The normaliser is computed on these, not on the stored
+    grasps, whose rotation the augmentation changes."""
+    draws = 1 if data.rotation == "none" else min(max_draws, max(1, -(-min_samples // len(data))))
+    out = []
+    with torch.no_grad():
+        for draw in range(draws):
+            items = [data.item(i, draw) for i in range(len(data))]
+            for k in range(0, len(items), 256):
+                chunk = Batch.collate(items[k:k + 256], device)
+                out.append(model.in_frame(chunk.grasp, chunk.points, chunk.contact))
+    return torch.cat(out)
+
+
+COMPONENT = GraspDiffuser

@@ -1,10 +1,11 @@
-"""Training of ContactDiffuser and GraspDiffuser on map shards: AdamW, cosine schedule with warm-up, EMA
-weights, a fixed seed, progress in the log, resumable.
+"""One training loop for every component (:mod:`tohgs.models.component`) on map shards: AdamW, cosine
+schedule with warm-up, EMA weights, a fixed seed, progress in the log, resumable.
 
-The checkpoint ``results/models/<task>/<model>.pt`` holds the EMA weights, the model and training
-config, the grasp normaliser (GraspDiffuser), the loss curve and the seconds spent. While training, a
-resume file ``<checkpoint>.resume`` is written every ``checkpoint_every`` steps (model, EMA, optimiser,
-schedule, RNG state and step); a restarted job continues from it, and it is removed at the end.
+The loop knows nothing of the network: it draws batches (:class:`tohgs.data.batch.Batch`), asks the
+component for its loss and steps the optimiser. The checkpoint ``results/models/<task>/<component>.pt``
+is :mod:`tohgs.models.checkpoint`'s format. While training, a resume file ``<checkpoint>.resume`` is
+written every ``checkpoint_every`` steps (model, EMA, optimiser, schedule, RNG state and step); a
+restarted job continues from it, and it is removed at the end.
 """
 
 from __future__ import annotations
@@ -20,44 +21,36 @@ import numpy as np
 import torch
 
 from tohgs.config import settings_from
+from tohgs.data.batch import Batch
 from tohgs.data.maps import MapDataset
 from tohgs.hand.model import HandModel
-from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
-from tohgs.models.diffusion import NoiseSchedule
-from tohgs.models.grasp_diffuser import LOSS_WEIGHTS, GraspDiffuser, GraspDiffuserConfig, grasp_losses, weighted_terms
+from tohgs.io import atomic_path, content_key
+from tohgs.models.checkpoint import load_checkpoint, save_checkpoint
+from tohgs.models.component import build_component
 
 log = logging.getLogger(__name__)
-MODELS = ("contact_diffuser", "grasp_diffuser")
 
 
 @dataclass(frozen=True)
 class TrainSettings:
     """Optimiser and schedule (the official code's: AdamW lr 5e-4, betas (0.95, 0.999), wd 1e-5, cosine
-    with 500 warm-up steps); ``steps`` replaces epochs so the budget is explicit."""
+    with 500 warm-up steps); ``steps`` replaces epochs so the budget is explicit. The defaults are the
+    config schema's ``training`` block (a test keeps them equal)."""
 
     steps: int = 1000
     batch: int = 16
     lr: float = 5e-4
     betas: tuple[float, float] = (0.95, 0.999)
     weight_decay: float = 1e-5
-    warmup: int = 50
-    ema_decay: float = 0.999
+    warmup: int = 100
+    ema_decay: float = 0.995
     rotation: str = "z"
-    checkpoint_every: int = 200
+    checkpoint_every: int = 250
     log_every: int = 50
     seed: int = 0
     threads: int = 1
     device: str = "auto"
-    train_points: int = 0  # a random subset of the N points per batch (0: all); the networks are per point
-
-
-def build_model(name: str, cfg: dict[str, Any]):
-    """A fresh model of ``name`` from its config mapping."""
-    if name == "contact_diffuser":
-        return ContactDiffuser(ContactDiffuserConfig.from_dict(cfg))
-    if name == "grasp_diffuser":
-        return GraspDiffuser(GraspDiffuserConfig.from_dict(cfg))
-    raise ValueError(f"unknown model {name!r} (expected one of {MODELS})")
+    train_points: int = 256  # a random subset of the N points per batch (0: all); the networks are per point
 
 
 def cosine_with_warmup(optimizer: torch.optim.Optimizer, warmup: int, total: int) -> torch.optim.lr_scheduler.LambdaLR:
@@ -133,33 +126,6 @@ def pick_device(device: str) -> torch.device:
     return dev
 
 
-def _collate(items: list[dict[str, Any]], device: torch.device, keep: np.ndarray | None = None) -> dict[str, torch.Tensor]:
-    """Stack items into tensors; ``keep`` selects a subset of the points (the same for the whole batch)."""
-    out = {}
-    for k in ("points", "normals", "d_init", "d_goal", "grasp", "contact"):
-        a = np.stack([it[k] for it in items])
-        if keep is not None and k != "grasp":
-            a = a[:, keep]
-        out[k] = torch.as_tensor(a, dtype=torch.float32, device=device)
-    return out
-
-
-def seen_grasps(model: GraspDiffuser, data: MapDataset, device: torch.device, min_samples: int = 4096,
-                max_draws: int = 8) -> torch.Tensor:
-    """(G', D) the training grasps as the network sees them: augmented as in training (draws 0, 1, ...
-    of every item, until ``min_samples`` or ``max_draws``) and in the network's frame. The normaliser is
-    computed on these, not on the stored grasps, whose rotation the augmentation changes."""
-    draws = 1 if data.rotation == "none" else min(max_draws, max(1, -(-min_samples // len(data))))
-    out = []
-    with torch.no_grad():
-        for draw in range(draws):
-            items = [data.item(i, draw) for i in range(len(data))]
-            for k in range(0, len(items), 256):
-                chunk = _collate(items[k:k + 256], device)
-                out.append(model.in_frame(chunk["grasp"], chunk["points"], chunk["contact"]))
-    return torch.cat(out)
-
-
 def gradient_shares(model: torch.nn.Module, losses: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
     """The gradient norm of each weighted loss term (``w_<term>``) over the model's parameters, as
     ``grad_<term>``: how much each term pulls, where the loss values alone do not say (a clamped term has
@@ -172,41 +138,23 @@ def gradient_shares(model: torch.nn.Module, losses: dict[str, torch.Tensor]) -> 
     return out
 
 
-def training_step(name: str, model, batch: dict[str, torch.Tensor], sched: NoiseSchedule, generator: torch.Generator,
-                  hand: HandModel | None, weights: tuple[float, float, float, float], alpha_contact: float
-                  ) -> dict[str, torch.Tensor]:
-    """One step's losses (``"loss"`` is what is optimised)."""
-    b = batch["points"].shape[0]
-    dev = batch["points"].device
-    t = torch.randint(0, sched.timesteps, (b,), generator=generator).to(dev)
-    if name == "contact_diffuser":
-        x0 = 2 * batch["contact"] - 1
-        noise = torch.randn(x0.shape, generator=generator).to(dev)
-        x_t = sched.q_sample(x0, noise, t)
-        cond = model.condition(batch["points"], batch["normals"], batch["d_init"], batch["d_goal"])
-        target = noise if sched.cfg.prediction == "epsilon" else x0
-        loss = torch.nn.functional.mse_loss(model(x_t, t, cond), target)
-        return {"loss": loss}
-    cond = model.condition(batch["points"], batch["normals"], batch["contact"])
-    x0 = model.encode(batch["grasp"], cond)
-    noise = torch.randn(x0.shape, generator=generator).to(dev)
-    x_t = sched.q_sample(x0, noise, t)
-    if model.cfg.cond_dropout > 0:
-        drop = (torch.rand(b, generator=generator) < model.cfg.cond_dropout).to(dev)
-        x0_hat = model(x_t, t, model.drop_context(cond, drop))
-    else:
-        x0_hat = model(x_t, t, cond)
-    terms = grasp_losses(model, hand, x0_hat, x0, cond, batch["contact"], alpha_contact)
-    weighted = weighted_terms(terms, weights)
-    return {"loss": sum(weighted.values()), **{k: v.mean() for k, v in terms.items()},
-            **{f"w_{k}": v for k, v in weighted.items()}}
+def train_component(component: str, kind: str, task: str, shard_paths: list[str | Path], network: dict[str, Any],
+                    settings: dict[str, Any], out: str | Path, hand: HandModel | None = None,
+                    curve_png: str | Path | None = None) -> dict[str, Any]:
+    """Train the component ``component`` of ``kind`` for ``task`` on the training shards; write its
+    checkpoint ``out`` (and the loss curve ``curve_png``).
 
+    Args:
+        component: the config's name of the component (recorded; the run key includes it).
+        kind: its kind (:func:`tohgs.models.component.component_class`).
+        task: the task (some losses weight their terms per task).
+        shard_paths: the task's training map shards.
+        network: the network config mapping (the kind's ``Config``).
+        settings: a mapping of :class:`TrainSettings`.
+        hand: the hand model, for a component whose loss poses the hand (``needs_hand``).
 
-def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: dict[str, Any], settings: dict[str, Any],
-                out: str | Path, hand: HandModel | None = None, curve_png: str | Path | None = None) -> dict[str, Any]:
-    """Train ``name`` for ``task`` on the training shards and write the checkpoint ``out``.
-
-    Returns the checkpoint dict.
+    Returns:
+        The checkpoint dict.
     """
     s = settings_from(TrainSettings, settings)
     torch.set_num_threads(max(1, s.threads))
@@ -214,16 +162,13 @@ def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: 
     torch.manual_seed(s.seed)
     data = MapDataset(shard_paths, per="grasp", rotation=s.rotation, seed=s.seed)
     if len(data) == 0:
-        raise ValueError(f"{task}/{name}: the training shards {list(map(str, shard_paths))} hold no task grasps")
-    model = build_model(name, model_cfg).to(device)
-    alpha_contact = float(data.shards[0].attrs.get("alpha_contact", 100.0))
-    if name == "grasp_diffuser":
+        raise ValueError(f"{task}/{component}: the training shards {list(map(str, shard_paths))} hold no task grasps")
+    model = build_component(kind, network).to(device)
+    if model.needs_hand:
         if hand is None:
-            raise ValueError("GraspDiffuser trains with the hand model in the loss; pass hand=")
+            raise ValueError(f"{task}/{component}: {type(model).__name__} trains with the hand model in the loss; pass hand=")
         hand = hand.to(device)
-        model.set_hand(hand)
-        model.set_normaliser(seen_grasps(model, data, device))
-    sched = NoiseSchedule(model.diffusion)
+    model.prepare(data, task, hand)
     opt = torch.optim.AdamW(model.parameters(), lr=s.lr, betas=s.betas, weight_decay=s.weight_decay)
     lr_sched = cosine_with_warmup(opt, s.warmup, s.steps)
     ema = EMA(model.parameters(), decay=s.ema_decay)
@@ -232,7 +177,7 @@ def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: 
     curve: list[dict[str, float]] = []
     step, spent = 0, 0.0
     resume = Path(str(out) + ".resume")
-    key = run_key(name, task, model_cfg, s, data)
+    key = run_key(kind, task, network, s, data)
     state = _load_resume(resume, key, device)
     if state is not None:
         model.load_state_dict(state["model"])
@@ -242,20 +187,19 @@ def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: 
         gen.set_state(state["gen"])
         order_rng.bit_generator.state = state["order_rng"]
         step, curve, spent = state["step"], state["curve"], state["spent"]
-        log.info("%s/%s: resuming at step %d from %s", task, name, step, resume)
-    weights = LOSS_WEIGHTS.get(task, LOSS_WEIGHTS["placing"])
+        log.info("%s/%s: resuming at step %d from %s", task, component, step, resume)
     n_params = sum(p.numel() for p in model.parameters())
-    log.info("%s/%s: %d parameters, %d training grasps, %d steps of batch %d on %s", task, name, n_params, len(data),
-             s.steps, s.batch, device)
+    log.info("%s/%s (%s): %d parameters, %d training grasps, %d steps of batch %d on %s", task, component, kind,
+             n_params, len(data), s.steps, s.batch, device)
     t0 = time.perf_counter()
     running: dict[str, tuple[float, int]] = {}  # sum and count of each logged value since the last row
+    n_pts = data.shards[0].points.shape[1]
     model.train()
     while step < s.steps:
         idx = order_rng.integers(0, len(data), s.batch)
-        n_pts = data.shards[0].points.shape[1]
         keep = order_rng.permutation(n_pts)[: s.train_points] if 0 < s.train_points < n_pts else None
-        batch = _collate([data.item(int(i), step) for i in idx], device, keep)
-        losses = training_step(name, model, batch, sched, gen, hand, weights, alpha_contact)
+        batch = Batch.collate([data.item(int(i), step) for i in idx], device, keep)
+        losses = model.loss(batch, gen)
         opt.zero_grad(set_to_none=True)
         if (step + 1) % s.log_every == 0 and any(k.startswith("w_") for k in losses):
             losses.update(gradient_shares(model, losses))
@@ -272,11 +216,9 @@ def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: 
             row = {"step": step, **{k: total / count for k, (total, count) in running.items()}, "lr": lr_sched.get_last_lr()[0]}
             curve.append(row)
             running = {}
-            log.info("%s/%s step %d/%d: %s", task, name, step, s.steps,
+            log.info("%s/%s step %d/%d: %s", task, component, step, s.steps,
                      ", ".join(f"{k} {v:.4g}" for k, v in row.items() if k != "step"))
         if step % s.checkpoint_every == 0 and step < s.steps:
-            from tohgs.io import atomic_path
-
             with atomic_path(resume) as tmp:
                 torch.save({"key": key, "model": model.state_dict(), "ema": ema.state_dict(), "opt": opt.state_dict(),
                             "lr_sched": lr_sched.state_dict(), "gen": gen.get_state(),
@@ -284,50 +226,26 @@ def train_model(name: str, task: str, shard_paths: list[str | Path], model_cfg: 
                             "spent": spent + time.perf_counter() - t0}, tmp)
     spent += time.perf_counter() - t0
     ema.copy_to(model.parameters())
-    ckpt = {"name": name, "task": task, "model_config": model_cfg, "train_settings": asdict(s),
-            "state_dict": {k: v.cpu() for k, v in model.state_dict().items()}, "loss_curve": curve,
-            "seconds": spent, "n_parameters": n_params, "n_train_grasps": len(data),
-            "alpha_contact": alpha_contact, "hand_wrist": data.shards[0].attrs["hand_wrist"]}
-    from tohgs.io import atomic_path
-
-    with atomic_path(out) as tmp:
-        torch.save(ckpt, tmp)
+    ckpt = save_checkpoint(out, model, component, task, network, asdict(s), loss_curve=curve, seconds=spent,
+                           n_parameters=n_params, n_train_grasps=len(data),
+                           alpha_contact=float(data.shards[0].attrs.get("alpha_contact", 100.0)),
+                           hand_wrist=data.shards[0].attrs["hand_wrist"])
     resume.unlink(missing_ok=True)
     if curve_png is not None:
-        plot_curve(curve, f"{task} / {name}", curve_png)
-    log.info("%s/%s: trained in %.1f s, final loss %.4g", task, name, spent, curve[-1]["loss"] if curve else float("nan"))
+        plot_curve(curve, f"{task} / {component}", curve_png)
+    log.info("%s/%s: trained in %.1f s, final loss %.4g", task, component, spent, curve[-1]["loss"] if curve else float("nan"))
     return ckpt
-
-
-def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
-    """A checkpoint or resume file as a dict, read with ``weights_only=True``: tensors, numbers, strings and
-    containers only, so a file that carries code is refused and nothing in it runs.
-
-    Raises:
-        ValueError: unreadable, or not made of plain data (the message names the file).
-    """
-    path = Path(path)
-    try:
-        obj = torch.load(path, map_location=map_location, weights_only=True)
-    except Exception as exc:
-        raise ValueError(f"{path}: not a readable checkpoint of plain data; refused ({type(exc).__name__}: "
-                         f"{str(exc).splitlines()[0] if str(exc) else ''})") from exc
-    if not isinstance(obj, dict):
-        raise ValueError(f"{path}: not a tohgs checkpoint (a {type(obj).__name__}, not a dict)")
-    return obj
 
 
 _NOT_SHAPING = ("threads", "device", "log_every", "checkpoint_every")  # settings a resumed run may change
 
 
-def run_key(name: str, task: str, model_cfg: dict[str, Any], settings: TrainSettings, data: MapDataset) -> str:
-    """What shapes a training run: the model, the settings that change its steps (not threads, device or
-    logging) and the training data. A resume file of another key is not resumed."""
-    from tohgs.io import content_key
-
+def run_key(kind: str, task: str, network: dict[str, Any], settings: TrainSettings, data: MapDataset) -> str:
+    """What shapes a training run: the kind and its network, the settings that change its steps (not
+    threads, device or logging) and the training data. A resume file of another key is not resumed."""
     shaping = {k: v for k, v in asdict(settings).items() if k not in _NOT_SHAPING}
     arrays = [sh.arrays[k] for sh in data.shards for k in ("grasp", "contact", "points", "d_init", "d_goal")]
-    return content_key(name, task, model_cfg, shaping, *arrays)
+    return content_key(kind, task, network, shaping, *arrays)
 
 
 def _load_resume(resume: Path, key: str, device: torch.device) -> dict[str, Any] | None:
@@ -347,18 +265,6 @@ def _load_resume(resume: Path, key: str, device: torch.device) -> dict[str, Any]
     return state
 
 
-def load_model(path: str | Path, device: str | torch.device = "cpu"):
-    """The model of a checkpoint (EMA weights, eval mode) and the checkpoint dict."""
-    path = Path(path)
-    ckpt = load_checkpoint(path)
-    for key in ("name", "model_config", "state_dict"):
-        if key not in ckpt:
-            raise ValueError(f"{path}: not a tohgs checkpoint (no '{key}')")
-    model = build_model(ckpt["name"], ckpt["model_config"])
-    model.load_state_dict(ckpt["state_dict"])
-    return model.to(device).eval(), ckpt
-
-
 def plot_curve(curve: list[dict[str, float]], title: str, out_png: str | Path) -> None:
     """Training curves as a PNG: the loss and each weighted term's contribution to it (``w_*``), and,
     where logged, each term's gradient norm (``grad_*``: what each term pulls, a clamped term none)."""
@@ -366,8 +272,6 @@ def plot_curve(curve: list[dict[str, float]], title: str, out_png: str | Path) -
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from tohgs.io import atomic_path
 
     keys = [k for k in (curve[0] if curve else {}) if k not in ("step", "lr")]
     grads = [k for k in {k for r in curve for k in r} if k.startswith("grad_")]

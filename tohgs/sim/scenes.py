@@ -30,9 +30,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import trimesh
 from scipy.spatial.transform import Rotation
 
+from tohgs.assets.mesh import object_mesh
 from tohgs.assets.supports import Support, Surface
 from tohgs.data.scenes import SceneSet
 from tohgs.sim.world import PhysicsSettings, World, quat_angle, quat_multiply, random_quaternion, yaw_quaternion
@@ -72,7 +72,7 @@ class ObjectAsset:
 def load_object_asset(objects_dir: str | Path, name: str) -> ObjectAsset:
     """Read object ``name`` of the objects stage (``<objects_dir>/<name>/mesh.obj`` and ``object.urdf``)."""
     d = Path(objects_dir) / name
-    mesh = trimesh.load(d / "mesh.obj", force="mesh", process=False)
+    mesh = object_mesh(objects_dir, name)
     return ObjectAsset(name, d / "object.urdf", np.asarray(mesh.vertices, dtype=np.float64))
 
 

@@ -13,6 +13,7 @@ import numpy as np
 import pybullet as pb
 
 from tohgs.assets.supports import Support
+from tohgs.sim.client import DirectClient
 
 
 @dataclass(frozen=True)
@@ -46,33 +47,19 @@ def pose_of(position, orientation) -> np.ndarray:
     return np.asarray(list(position) + list(orientation), dtype=np.float64)
 
 
-class World:
+class World(DirectClient):
     """One PyBullet client (DIRECT mode) with helpers; use as a context manager."""
 
     def __init__(self, settings: PhysicsSettings = PhysicsSettings(), gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)):
+        super().__init__()
         self.settings = settings
         self.gravity = gravity
-        self.cid = pb.connect(pb.DIRECT)
         self.reset()
-
-    def __enter__(self) -> "World":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-    def close(self) -> None:
-        if self.cid is not None and pb.isConnected(self.cid):
-            pb.disconnect(self.cid)
-        self.cid = None
 
     def reset(self) -> None:
         """Empty the world."""
-        pb.resetSimulation(physicsClientId=self.cid)
-        pb.setGravity(*self.gravity, physicsClientId=self.cid)
-        pb.setTimeStep(self.settings.time_step, physicsClientId=self.cid)
-        pb.setPhysicsEngineParameter(numSolverIterations=self.settings.solver_iterations, deterministicOverlappingPairs=1,
-                                     physicsClientId=self.cid)
+        self.reset_simulation(self.gravity, self.settings.time_step, self.settings.solver_iterations,
+                              deterministicOverlappingPairs=1)
 
     def add_support(self, support: Support, pose: np.ndarray | None = None) -> list[int]:
         """Static box bodies of a support placed at ``pose`` (default: the world origin)."""

@@ -10,8 +10,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-import trimesh  # noqa: E402
 
+from tohgs.assets.mesh import object_mesh  # noqa: E402
 from tohgs.data.grasps import read_prior_grasps  # noqa: E402
 from tohgs.grasps.filter import CHECKS  # noqa: E402
 from tohgs.hand.assets import HandAssets  # noqa: E402
@@ -61,7 +61,7 @@ def plot_prior_grasps(store_paths: list[str | Path], objects_dir: str | Path, ha
     faces = np.asarray(hand.closed_faces)
     for row, name in enumerate(names):
         g = read_prior_grasps(stores[name], filtered=True)
-        mesh = trimesh.load(Path(objects_dir) / name / "mesh.obj", force="mesh", process=False)
+        mesh = object_mesh(objects_dir, name)
         order = np.argsort(g.energies["total"])
         acc = [i for i in order if g.passed[i]][:n_accepted]
         rej = [i for i in order if not g.passed[i]][:1]

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
-import trimesh
 
+from tohgs.assets.mesh import object_mesh
 from tohgs.assets.objects import read_catalog
 from tohgs.viz.render import draw_mesh, save_figure, set_equal
 
@@ -39,7 +39,7 @@ def plot_objects(catalog_csv: str | Path, out_png: str | Path, max_objects: int 
     nrows = int(np.ceil(len(shown) / ncols))
     fig = plt.figure(figsize=(2.2 * ncols, 2.3 * nrows + 0.3 + 0.18 * len(rejected)))
     for k, row in enumerate(shown):
-        mesh = trimesh.load(catalog_csv.parent / row.name / "mesh.obj", force="mesh", process=False)
+        mesh = object_mesh(catalog_csv.parent, row.name)
         ax = fig.add_subplot(nrows, ncols, k + 1, projection="3d")
         ax.view_init(elev=25, azim=-60)
         draw_mesh(ax, mesh.vertices, mesh.faces, SPLIT_COLORS.get(row.split, "tab:gray"))

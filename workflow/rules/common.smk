@@ -1,5 +1,7 @@
-# Configuration validation, the object selection, wildcard constraints and helper functions.
+# Configuration validation, the object selection, the components, methods and tables of the config, the
+# derived code inputs and helper functions.
 import os
+import re
 import sys
 from collections import Counter
 from pathlib import Path
@@ -9,9 +11,11 @@ REPO = Path(workflow.basedir).parent
 if str(REPO) not in sys.path:  # parse time only; jobs import the installed package (pip install -e .)
     sys.path.insert(0, str(REPO))
 
-from tohgs.config import ConfigError, validate_config
+from tohgs.code_inputs import code_inputs
+from tohgs.config import ConfigError, method_setting_keys, validate_config
 from tohgs.assets.objects import check_split_sizes, read_catalog
 from tohgs.assets.sources import select_objects, task_set
+from tohgs.methods import method_components
 
 try:
     validate_config(config)
@@ -33,14 +37,25 @@ for _file, _reason in SKIPPED_FILES:
 OBJECT_NAME = "(pb|brick|dir)-[a-z0-9-]+"  # the {object} wildcard (see tohgs.assets.sources)
 
 
-def code(*modules):
-    """The tohgs source files a job runs: packages ("sim": all its modules) or single modules
-    ("data/scenes", "config"). They are the job's code inputs, so an edit makes it stale."""
-    files = []
-    for name in modules:
-        path = REPO / "tohgs" / name
-        single = path.with_suffix(".py")
-        files += [single] if single.is_file() else sorted(path.glob("*.py"))
+def objects_dir_of_supports(wildcards, input):
+    """The objects folder (``results/objects``), where the supports folder (an input) lies. The jobs
+    that read object meshes take it as a param, so their scripts never derive paths."""
+    return os.path.dirname(input.supports)
+
+
+def objects_dir_of_catalog(wildcards, input):
+    """The objects folder, where the catalog (an input) lies."""
+    return os.path.dirname(input.catalog)
+
+
+def code(script, *modules):
+    """The code inputs of a rule: every tohgs source file its script (``workflow/scripts/<script>``) runs,
+    derived from the imports, plus the modules it loads by name (``"models/grasp_diffuser"``: a component
+    or method kind) and theirs (:mod:`tohgs.code_inputs`). Nothing is listed by hand, so nothing drifts."""
+    try:
+        files = code_inputs(REPO / "workflow" / "scripts" / script, modules, REPO)
+    except FileNotFoundError as err:
+        raise WorkflowError(str(err)) from None
     return [os.path.relpath(f) for f in files]
 
 
@@ -94,9 +109,22 @@ def object_size(wildcards):
     return _canonical({**config["objects"]["size"], "seed": config["seed"]})
 
 
+_CATALOG = {}  # (path, mtime) -> the catalog table
+
+
+def catalog_frame():
+    """The catalog checkpoint's table, read once per version of the file (input functions ask often)."""
+    path = checkpoints.catalog.get().output[0]
+    key = (path, os.stat(path).st_mtime_ns)
+    if key not in _CATALOG:
+        _CATALOG.clear()
+        _CATALOG[key] = read_catalog(path)
+    return _CATALOG[key]
+
+
 def accepted_objects(task):
     """Accepted objects of a task's set (bricks for stacking), read from the catalog checkpoint."""
-    catalog = read_catalog(checkpoints.catalog.get().output[0])
+    catalog = catalog_frame()
     return sorted(catalog[catalog.task_set == task_set(task)].name)
 
 
@@ -117,7 +145,7 @@ def scene_settings(wildcards):
 
 def prior_stores(wildcards):
     """The filtered prior-grasp store of every accepted object (objects and bricks)."""
-    catalog = read_catalog(checkpoints.catalog.get().output[0])
+    catalog = catalog_frame()
     return expand("results/grasps/prior/{object}.zarr", object=sorted(catalog.name))
 
 
@@ -131,7 +159,7 @@ SPLITS = ("train", "val", "test")
 
 def split_objects(wildcards):
     """Accepted target objects of the task's set in the split (the catalog's split column)."""
-    catalog = read_catalog(checkpoints.catalog.get().output[0])
+    catalog = catalog_frame()
     sel = catalog[(catalog.task_set == task_set(wildcards.task)) & (catalog.split == wildcards.split)]
     return sorted(sel.name)
 
@@ -158,9 +186,68 @@ def all_task_grasps(wildcards):
     return [f"results/grasps/task/{task}/{o}.zarr" for task in config["scenes"]["tasks"] for o in accepted_objects(task)]
 
 
-MODELS = ("contact_diffuser", "grasp_diffuser")
-# Prediction methods of the diffusers: where their contact maps come from.
-METHOD_CONTACT = {"ours": "model", "ours-gt-contact": "ground_truth"}
+COMPONENTS = config["components"]
+METHODS = config["methods"]
+TABLES = config["tables"]
+
+
+def _names(names):
+    """A wildcard constraint matching exactly ``names``."""
+    return "|".join(re.escape(n) for n in sorted(names))
+
+
+COMPONENT_NAME, METHOD_NAME, TABLE_NAME = _names(COMPONENTS), _names(METHODS), _names(TABLES)
+
+
+def used_methods():
+    """The methods a table or the figures use, in first-use order: only these are predicted."""
+    names = [m for t in TABLES.values() for m in t["rows"]] + [config["figures"]["method"]]
+    return list(dict.fromkeys(names))
+
+
+def components_of(method):
+    """The components the method ``method`` names (:func:`tohgs.methods.method_components`)."""
+    return method_components(METHODS[method], COMPONENTS)
+
+
+def used_components():
+    """The components of the used methods: only these are trained."""
+    return list(dict.fromkeys(c for m in used_methods() for c in components_of(m)))
+
+
+def component_settings(wildcards):
+    """The training settings of one component: the training block overlaid with the component's own."""
+    return _canonical({**config["training"], **COMPONENTS[wildcards.component]["training"]})
+
+
+def method_settings(wildcards):
+    """The sampling settings of one method: the prediction block overlaid with the method's own, only those
+    its kind reads (so a sampler setting leaves the dataset row's draw be)."""
+    settings = {**config["prediction"], **METHODS[wildcards.method]["settings"]}
+    keys = method_setting_keys(METHODS[wildcards.method]["kind"])
+    return _canonical({k: v for k, v in settings.items() if keys is None or k in keys})
+
+
+def method_block(wildcards):
+    """The method's config block as its predictions depend on it: without its label (the tables' concern)."""
+    return _canonical({k: v for k, v in METHODS[wildcards.method].items() if k != "label"})
+
+
+def method_models(wildcards):
+    """The checkpoints of the method's components for the task."""
+    return [f"results/models/{wildcards.task}/{c}.pt" for c in components_of(wildcards.method)]
+
+
+def method_code(wildcards):
+    """The code a prediction job of the method runs: the script's, the method kind's, its components' kinds'."""
+    kinds = [f"methods/{METHODS[wildcards.method]['kind']}"]
+    kinds += [f"models/{COMPONENTS[c]['kind']}" for c in components_of(wildcards.method)]
+    return code("predict.py", *kinds)
+
+
+def checked_components():
+    """The used components whose kinds have checks (tohgs.models.checks.CHECKS: the diffusers)."""
+    return [c for c in used_components() if COMPONENTS[c]["kind"] in ("contact_diffuser", "grasp_diffuser")]
 
 
 def train_shards(wildcards):
@@ -171,21 +258,9 @@ def test_shards(wildcards):
     return [f"results/maps/{wildcards.task}/test/shard-{k}.zarr" for k in range(config["maps"]["shards"]["test"])]
 
 
-def contact_model_of(wildcards):
-    """ContactDiffuser's checkpoint when the method samples contact maps from it."""
-    if METHOD_CONTACT[wildcards.method] == "model":
-        return [f"results/models/{wildcards.task}/contact_diffuser.pt"]
-    return []
-
-
-def contact_source_of(wildcards):
-    return METHOD_CONTACT[wildcards.method]
-
-
 def prediction_outputs():
-    """Every task's prediction store of every configured method."""
-    return [f"results/predictions/{task}/{m}.zarr" for task in config["scenes"]["tasks"]
-            for m in config["prediction"]["methods"]]
+    """Every task's prediction store of every used method."""
+    return [f"results/predictions/{task}/{m}.zarr" for task in config["scenes"]["tasks"] for m in used_methods()]
 
 
 def test_scene_stores(wildcards):
@@ -198,10 +273,10 @@ def all_test_shards(wildcards):
     return [p for task in config["scenes"]["tasks"] for p in test_shards(SimpleNamespace(task=task))]
 
 
-def metric_outputs(wildcards):
-    """Every task's metric file of every method of the table."""
+def table_metrics(wildcards):
+    """Every task's metric file of every row of the table."""
     return [f"results/metrics/{task}/{m}.parquet" for task in config["scenes"]["tasks"]
-            for m in config["evaluation"]["methods"]]
+            for m in TABLES[wildcards.table]["rows"]]
 
 
 def final_outputs():
@@ -216,9 +291,9 @@ def final_outputs():
         "results/figures/prior_grasps.png",
         "results/maps/summary.csv",
         "results/figures/maps.png",
-        "results/tables/table1.csv",
         "results/figures/contact_maps.png",
-    ] + prediction_outputs() + [f"results/models/{task}/checks.json" for task in tasks] + [
+    ] + [f"results/tables/{t}.csv" for t in TABLES] + prediction_outputs() + [
+        f"results/models/{task}/checks.json" for task in tasks if checked_components()] + [
         f"results/figures/{kind}_{task}.png" for task in tasks for kind in ("scenes", "predictions")]
 
 

@@ -9,10 +9,11 @@ rule task_grasps:
         objects=object_dirs(),
         supports="results/objects/supports",
         hand="results/hand/hand.npz",
-        code=code("grasps/expand", "geometry/raycast", "data/task_grasps", "data/store", "data/scenes", "data/grasps"),
+        code=code("task_grasps.py"),
     output:
         directory("results/grasps/task/{task}/{object}.zarr"),
     params:
+        objects_dir=objects_dir_of_supports,
         settings=setting("task_grasps"),
     conda:
         "../envs/tohgs.yaml"
@@ -29,10 +30,11 @@ rule maps:
         objects=object_dirs(),
         supports="results/objects/supports",
         hand="results/hand/hand.npz",
-        code=code("data/build_maps", "data/maps", "data/store", "geometry/maps", "grasps/expand", "data/scenes", "data/task_grasps"),
+        code=code("maps.py"),
     output:
         directory("results/maps/{task}/{split}/shard-{shard}.zarr"),
     params:
+        objects_dir=objects_dir_of_supports,
         settings=setting("maps", "points"),
         n_shards=lambda w: config["maps"]["shards"][w.split],
         test_configs=setting("maps", "test_configs"),
@@ -51,7 +53,7 @@ rule dataset_summary:
     input:
         task_grasps=all_task_grasps,
         shards=all_map_shards,
-        code=code("data/maps", "data/task_grasps", "data/store"),
+        code=code("dataset_summary.py"),
     output:
         "results/maps/summary.csv",
     conda:
@@ -66,7 +68,7 @@ rule maps_figure:
     input:
         shards=all_map_shards,
         hand="results/hand/hand.npz",
-        code=code("viz/maps", "viz/render", "data/maps", "data/store"),
+        code=code("maps_figure.py"),
     output:
         report("results/figures/maps.png", caption="../report/maps.rst", category="Dataset"),
     conda:

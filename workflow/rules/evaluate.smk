@@ -1,22 +1,5 @@
-# Evaluation: the dataset reference row's grasps, per-grasp metrics per task and method, Table 1 with the
-# QR grid, and the qualitative figures (predicted hands in their scenes, contact maps next to the truth).
-
-
-rule reference_grasps:
-    input:
-        shards=test_shards,
-        code=code("data/predictions", "data/maps", "data/store", "grasps/expand"),
-    output:
-        directory("results/predictions/{task}/dataset.zarr"),
-    params:
-        samples=setting("prediction", "samples"),
-        seed=setting("evaluation", "dataset_seed"),
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/predictions/{task}/dataset.log",
-    script:
-        "../scripts/reference_grasps.py"
+# Evaluation: per-grasp metrics per task and method, the tables of the config (each with its QR grid), and
+# the qualitative figures (predicted hands in their scenes, contact maps next to the truth).
 
 
 rule evaluate:
@@ -26,11 +9,11 @@ rule evaluate:
         objects=object_dirs(),
         supports="results/objects/supports",
         hand="results/hand/hand.npz",
-        code=code("metrics/evaluate", "metrics/quality", "data/predictions", "data/scenes", "data/store", "grasps/expand",
-                  "geometry/raycast", "config"),
+        code=code("evaluate.py"),
     output:
         "results/metrics/{task}/{method}.parquet",
     params:
+        objects_dir=objects_dir_of_supports,
         sd=setting("metrics", "sd"),
         voxel_pitch=setting("metrics", "voxel_pitch"),
         cache_dir=setting("cache_dir"),
@@ -45,39 +28,41 @@ rule evaluate:
         "../scripts/evaluate.py"
 
 
-rule table1:
+rule table:
     input:
-        metrics=metric_outputs,
-        code=code("metrics/tables", "metrics/evaluate"),
+        metrics=table_metrics,
+        code=code("table.py"),
     output:
-        csv=report("results/tables/table1.csv", caption="../report/table1.rst", category="Tables"),
-        md="results/tables/table1.md",
-        grid=report("results/tables/qr_grid.csv", caption="../report/qr_grid.rst", category="Tables"),
+        csv=report("results/tables/{table}.csv", caption="../report/table.rst", category="Tables"),
+        md="results/tables/{table}.md",
+        grid=report("results/tables/{table}_qr_grid.csv", caption="../report/qr_grid.rst", category="Tables"),
     params:
         tasks=setting("scenes", "tasks"),
-        methods=setting("evaluation", "methods"),
+        rows=lambda w: setting("tables", w.table, "rows"),
+        labels=lambda w: {m: METHODS[m]["label"] for m in TABLES[w.table]["rows"]},
+        columns=lambda w: setting("tables", w.table, "columns"),
         qr=setting("evaluation", "qr"),
         qr_grid=setting("evaluation", "qr_grid"),
     conda:
         "../envs/tohgs.yaml"
     log:
-        "logs/tables/table1.log",
+        "logs/tables/{table}.log",
     script:
-        "../scripts/table1.py"
+        "../scripts/table.py"
 
 
 rule predictions_figure:
     input:
-        predictions="results/predictions/{task}/ours.zarr",
+        predictions=f"results/predictions/{{task}}/{config['figures']['method']}.zarr",
         scenes=test_scene_stores,
         objects=object_dirs(),
         supports="results/objects/supports",
         hand="results/hand/hand.npz",
-        code=code("viz/predictions", "viz/render", "viz/scenes", "sim", "data/predictions", "data/scenes", "data/maps",
-                  "data/store"),
+        code=code("predictions_figure.py"),
     output:
         report("results/figures/predictions_{task}.png", caption="../report/predictions.rst", category="Evaluation"),
     params:
+        objects_dir=objects_dir_of_supports,
         configs=setting("figures", "prediction_configs"),
     conda:
         "../envs/tohgs.yaml"
@@ -89,9 +74,10 @@ rule predictions_figure:
 
 rule contact_maps_figure:
     input:
-        predictions=expand("results/predictions/{task}/ours.zarr", task=config["scenes"]["tasks"]),
+        predictions=expand("results/predictions/{task}/{method}.zarr", task=config["scenes"]["tasks"],
+                           method=config["figures"]["method"]),
         shards=all_test_shards,
-        code=code("viz/predictions", "viz/render", "viz/scenes", "sim", "data/predictions", "data/maps", "data/store"),
+        code=code("contact_maps_figure.py"),
     output:
         report("results/figures/contact_maps.png", caption="../report/contact_maps.rst", category="Evaluation"),
     params:

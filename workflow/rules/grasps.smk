@@ -6,8 +6,7 @@ rule prior_synthesis:
     input:
         object="results/objects/{object}",
         hand="results/hand/hand.npz",
-        code=code("grasps/synthesis", "grasps/filter", "grasps/prior", "geometry/sdf", "geometry/raycast",
-                  "metrics/quality", "data/grasps", "data/store", "config", "runtime"),
+        code=code("prior_synthesis.py"),
     output:
         directory("results/grasps/prior/raw/{object}.zarr"),
     params:
@@ -33,7 +32,7 @@ rule prior_synthesis:
 rule prior_filter:
     input:
         raw="results/grasps/prior/raw/{object}.zarr",
-        code=code("grasps/filter", "data/grasps", "data/store", "config"),
+        code=code("prior_filter.py"),
     output:
         directory("results/grasps/prior/{object}.zarr"),
     params:
@@ -49,7 +48,7 @@ rule prior_filter:
 rule prior_summary:
     input:
         stores=prior_stores,
-        code=code("grasps/filter", "data/grasps", "data/store"),
+        code=code("prior_summary.py"),
     output:
         "results/grasps/prior/summary.csv",
     conda:
@@ -65,10 +64,11 @@ rule prior_figure:
         stores=prior_stores,
         catalog="results/objects/catalog.csv",
         hand="results/hand/hand.npz",
-        code=code("viz/grasps", "viz/render", "data/grasps", "data/store"),
+        code=code("prior_figure.py"),
     output:
         report("results/figures/prior_grasps.png", caption="../report/prior_grasps.rst", category="Prior grasps"),
     params:
+        objects_dir=objects_dir_of_catalog,
         n_objects=setting("figures", "prior_objects"),
     conda:
         "../envs/tohgs.yaml"

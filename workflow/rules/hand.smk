@@ -4,7 +4,7 @@
 rule hand_model:
     input:
         source=hand_source,
-        code=code("hand"),
+        code=code("hand_model.py"),
     output:
         "results/hand/hand.npz",
     params:
@@ -22,7 +22,7 @@ rule hand_model:
 rule hand_figure:
     input:
         hand="results/hand/hand.npz",
-        code=code("hand", "viz/hand", "viz/render"),
+        code=code("hand_figure.py"),
     output:
         report("results/figures/hand.png", caption="../report/hand.rst", category="Hand"),
     conda:

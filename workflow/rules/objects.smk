@@ -5,7 +5,7 @@
 rule prepare_object:
     input:
         source=object_source,
-        code=code("assets"),
+        code=code("prepare_object.py"),
     output:
         directory("results/objects/{object}"),
     params:
@@ -27,7 +27,7 @@ rule prepare_object:
 checkpoint catalog:
     input:
         objects=object_dirs(),
-        code=code("assets"),
+        code=code("catalog.py"),
     output:
         "results/objects/catalog.csv",
     params:
@@ -44,7 +44,7 @@ checkpoint catalog:
 
 rule supports:
     input:
-        code=code("assets"),
+        code=code("supports.py"),
     output:
         directory("results/objects/supports"),
     params:
@@ -62,7 +62,7 @@ rule objects_figure:
     input:
         catalog="results/objects/catalog.csv",
         objects=object_dirs(),
-        code=code("viz/objects", "viz/render"),
+        code=code("objects_figure.py"),
     output:
         report("results/figures/objects.png", caption="../report/objects.rst", category="Objects"),
     params:

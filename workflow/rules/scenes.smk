@@ -6,10 +6,11 @@ rule scenes:
     input:
         objects=object_dirs(),
         supports="results/objects/supports",
-        code=code("sim", "data/scenes", "data/store", "assets/sources"),
+        code=code("scenes.py"),
     output:
         directory("results/scenes/{task}/{object}.zarr"),
     params:
+        objects_dir=objects_dir_of_supports,
         settings=scene_settings,
         seed=setting("seed"),
     conda:
@@ -26,10 +27,11 @@ rule scenes_figure:
     input:
         scenes=scene_stores,
         supports="results/objects/supports",
-        code=code("viz/scenes", "viz/render", "sim", "data/scenes", "data/store"),
+        code=code("scenes_figure.py"),
     output:
         report("results/figures/scenes_{task}.png", caption="../report/scenes.rst", category="Scenes"),
     params:
+        objects_dir=objects_dir_of_supports,
         max_configs=setting("figures", "scene_configs"),
     conda:
         "../envs/tohgs.yaml"

@@ -1,44 +1,41 @@
-# The diffusers: training per task and model, then test predictions per task and method.
+# Components and methods: training per task and component, then test predictions per task and method.
 
 
 rule train:
     input:
         shards=train_shards,
         hand="results/hand/hand.npz",
-        code=code("models/train", "models/diffusion", "models/pointnet2", "models/contact_diffuser",
-                  "models/grasp_diffuser", "data/maps", "data/store", "grasps/expand", "config"),
+        code=lambda w: code("train.py", f"models/{COMPONENTS[w.component]['kind']}"),
     output:
-        model="results/models/{task}/{model}.pt",
-        curve=report("results/models/{task}/{model}.png", caption="../report/training.rst", category="Training"),
+        model="results/models/{task}/{component}.pt",
+        curve=report("results/models/{task}/{component}.png", caption="../report/training.rst", category="Training"),
     params:
-        model=lambda w: setting("models", w.model),
-        settings=lambda w: _canonical({**config["training"]["common"], **config["training"][w.model]}),
-    threads: config["training"]["common"]["threads"]
+        kind=lambda w: COMPONENTS[w.component]["kind"],
+        network=lambda w: _canonical(COMPONENTS[w.component]["network"]),
+        settings=component_settings,
+    threads: config["training"]["threads"]
     resources:
         gpu=1,  # a hint for cluster executors; local runs ignore resources they are not given
     conda:
         "../envs/tohgs.yaml"
     log:
-        "logs/models/{task}/{model}.log",
+        "logs/models/{task}/{component}.log",
     benchmark:
-        "results/benchmarks/models/{task}/{model}.tsv"
+        "results/benchmarks/models/{task}/{component}.tsv"
     script:
         "../scripts/train.py"
 
 
 rule predict:
-    wildcard_constraints:
-        method="ours|ours-gt-contact",
     input:
         shards=test_shards,
-        grasp_model="results/models/{task}/grasp_diffuser.pt",
-        contact_model=contact_model_of,
-        code=code("models", "data/maps", "data/store", "data/predictions", "grasps/expand"),
+        models=method_models,
+        code=method_code,
     output:
         directory("results/predictions/{task}/{method}.zarr"),
     params:
-        contact_source=contact_source_of,
-        settings=_canonical({k: v for k, v in config["prediction"].items() if k != "methods"}),
+        method=method_block,
+        settings=method_settings,
     threads: config["prediction"]["threads"]
     conda:
         "../envs/tohgs.yaml"
@@ -53,14 +50,13 @@ rule predict:
 rule model_checks:
     input:
         shards=train_shards,
-        grasp_model="results/models/{task}/grasp_diffuser.pt",
-        contact_model="results/models/{task}/contact_diffuser.pt",
+        models=lambda w: [f"results/models/{w.task}/{c}.pt" for c in checked_components()],
         hand="results/hand/hand.npz",
-        code=code("models", "data/maps", "data/store", "grasps/expand", "hand"),
+        code=code("model_checks.py", "models/contact_diffuser", "models/grasp_diffuser"),
     output:
         "results/models/{task}/checks.json",
     params:
-        seed=setting("training", "common", "seed"),
+        seed=setting("training", "seed"),
     conda:
         "../envs/tohgs.yaml"
     log:

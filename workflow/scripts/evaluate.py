@@ -1,7 +1,5 @@
 """Snakemake script of rule evaluate: one row of metrics per predicted grasp of a task and method."""
 import logging
-from pathlib import Path
-
 from tohgs.io import setup_logging
 
 setup_logging(snakemake.log[0])
@@ -11,7 +9,7 @@ from tohgs.io import atomic_path  # noqa: E402
 from tohgs.metrics.evaluate import evaluate_predictions  # noqa: E402
 
 inp, p = snakemake.input, snakemake.params
-rows = evaluate_predictions(inp.predictions, inp.scenes, Path(inp.supports).parent, f"{inp.supports}/supports.json",
+rows = evaluate_predictions(inp.predictions, inp.scenes, snakemake.params.objects_dir, f"{inp.supports}/supports.json",
                             HandAssets.load(inp.hand), p.sd, p.voxel_pitch, p.cache_dir, progress=True)
 with atomic_path(snakemake.output[0]) as tmp:
     rows.to_parquet(tmp, index=False)

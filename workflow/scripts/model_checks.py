@@ -1,4 +1,6 @@
 """Snakemake script of rule model_checks: do a task's trained diffusers use their condition?"""
+from pathlib import Path
+
 from tohgs.io import setup_logging
 
 setup_logging(snakemake.log[0])
@@ -7,5 +9,5 @@ from tohgs.hand import HandAssets, HandModel  # noqa: E402
 from tohgs.models.checks import model_checks  # noqa: E402
 
 inp = snakemake.input
-model_checks(snakemake.wildcards.task, inp.shards, inp.grasp_model, inp.contact_model,
+model_checks(snakemake.wildcards.task, inp.shards, {Path(m).stem: m for m in inp.models},
              HandModel(HandAssets.load(inp.hand)), snakemake.output[0], seed=snakemake.params.seed)

@@ -1,10 +1,13 @@
 """Snakemake script of rule predict: grasps for every test configuration of a task with one method."""
+from pathlib import Path
+
 from tohgs.io import setup_logging
 
 setup_logging(snakemake.log[0])
 
-from tohgs.models.predict import predict  # noqa: E402
+from tohgs.methods.predict import predict  # noqa: E402
 
-w, inp, p = snakemake.wildcards, snakemake.input, snakemake.params
-predict(w.task, w.method, inp.shards, inp.grasp_model, p.contact_source, {**p.settings, "threads": snakemake.threads},
-        snakemake.output[0], contact_ckpt=inp.contact_model[0] if inp.contact_model else None)
+inp, p = snakemake.input, snakemake.params
+out = Path(snakemake.output[0])
+predict(snakemake.wildcards.task, out.stem, p.method, inp.shards, {Path(m).stem: m for m in inp.models},
+        {**p.settings, "threads": snakemake.threads}, out)

@@ -7,5 +7,5 @@ setup_logging(snakemake.log[0])
 
 from tohgs.viz.scenes import plot_scenes  # noqa: E402
 
-plot_scenes(snakemake.input.scenes, Path(snakemake.input.supports).parent, Path(snakemake.input.supports) / "supports.json",
+plot_scenes(snakemake.input.scenes, snakemake.params.objects_dir, Path(snakemake.input.supports) / "supports.json",
             snakemake.output[0], snakemake.wildcards.task, snakemake.params.max_configs)

@@ -1,11 +1,14 @@
-"""Snakemake script of rule train: one diffuser for one task."""
+"""Snakemake script of rule train: one component for one task."""
+from pathlib import Path
+
 from tohgs.io import setup_logging
 
 setup_logging(snakemake.log[0])
 
 from tohgs.hand import HandAssets, HandModel  # noqa: E402
-from tohgs.models.train import train_model  # noqa: E402
+from tohgs.models.train import train_component  # noqa: E402
 
-w, p = snakemake.wildcards, snakemake.params
-train_model(w.model, w.task, snakemake.input.shards, p.model, {**p.settings, "threads": snakemake.threads},
-            snakemake.output.model, hand=HandModel(HandAssets.load(snakemake.input.hand)), curve_png=snakemake.output.curve)
+inp, out, p = snakemake.input, snakemake.output, snakemake.params
+train_component(Path(out.model).stem, p.kind, snakemake.wildcards.task, inp.shards, p.network,
+                {**p.settings, "threads": snakemake.threads}, out.model, hand=HandModel(HandAssets.load(inp.hand)),
+                curve_png=out.curve)

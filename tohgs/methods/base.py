@@ -1,0 +1,72 @@
+"""The interface of a method kind, and the sampling settings every method shares."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+
+from tohgs.data.batch import Batch
+from tohgs.data.maps import MapShard
+
+
+@dataclass(frozen=True)
+class PredictSettings:
+    """``samples`` S per configuration (the paper's 16); sampler ``ddpm`` (all T steps) or ``ddim`` with
+    ``steps`` steps; ``seed``; ``device``; GraspDiffuser's classifier-free ``guidance`` scale;
+    ``contact_smoothing``, the neighbours over which ContactDiffuser's maps are averaged (0: none). A
+    method's ``settings`` block overlays the config's ``prediction`` block."""
+
+    samples: int = 16
+    sampler: str = "ddim"
+    steps: int = 20
+    seed: int = 0
+    threads: int = 1
+    device: str = "auto"
+    guidance: float = 1.0  # GraspDiffuser's classifier-free guidance scale (1: none; needs cond_dropout)
+    contact_smoothing: int = 0  # k of smooth_contact for a contact component's maps (0 or 1: none)
+
+
+@dataclass
+class Prediction:
+    """One configuration's S predictions: ``contact`` (S, N) the maps the grasps were made from, in [0, 1];
+    ``grasp`` (S, 51) grasps at the initial pose in the network frame; ``seconds`` per stage."""
+
+    contact: np.ndarray
+    grasp: np.ndarray
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+class Method:
+    """A method kind: built once per prediction job from its config block, its trained components (by
+    config name, eval mode, on ``device``) and the settings; then asked for each test configuration.
+
+    Subclasses set ``needs`` (the method keys that must name components) and implement :meth:`predict`.
+    """
+
+    def __init__(self, name: str, cfg: dict[str, Any], models: dict[str, torch.nn.Module], settings: PredictSettings,
+                 device: torch.device):
+        self.name, self.cfg, self.models, self.settings, self.device = name, cfg, models, settings, device
+
+    def model(self, key: str) -> torch.nn.Module:
+        """The component the method key ``key`` names (a clear error when the job was not given it)."""
+        comp = self.cfg.get(key)
+        if comp not in self.models:
+            raise ValueError(f"method {self.name!r}: its {key} {comp!r} is not among the trained components "
+                             f"given ({sorted(self.models)})")
+        return self.models[comp]
+
+    def predict(self, batch: Batch, shard: MapShard, row: int, generator: torch.Generator,
+                rng: np.random.Generator) -> Prediction | None:
+        """The S predictions of one test configuration: ``batch`` is the configuration repeated S times
+        (no contact, no grasp), ``shard`` / ``row`` where it lies (a ground-truth source reads them);
+        ``generator`` (torch) and ``rng`` (numpy) are the job's seeded streams. None: the configuration
+        cannot be predicted (e.g. ground-truth maps where it has no task grasp)."""
+        raise NotImplementedError
+
+
+def gt_rows(shard: MapShard, row: int) -> np.ndarray:
+    """The task grasps (rows of the shard's grasp arrays) of configuration ``row``."""
+    return np.flatnonzero(shard.grasp_config == row)

@@ -1,0 +1,90 @@
+"""The one checkpoint format of every component, and its loader (``torch.load(weights_only=True)``).
+
+``results/models/<task>/<component>.pt`` is a dict of plain data (tensors, numbers, strings, lists, dicts),
+so loading it runs no code:
+
+================  ==================================================================================
+key               value
+================  ==================================================================================
+format            ``"tohgs.checkpoint"``; ``format_version``: :data:`FORMAT_VERSION`
+tohgs_version     the package version that wrote it
+component, kind   the config's component name and its kind (:mod:`tohgs.models.component`)
+task              the task it was trained for
+network_config    the network config (the kind's ``Config`` as a mapping)
+training_config   the training settings (:class:`tohgs.models.train.TrainSettings` as a mapping)
+state_dict        the EMA weights, with the buffers the data fixed (a normaliser, the hand's wrist)
+normaliser        the data normaliser (``{"mean": ..., "std": ...}``, tensors) or None
+loss_curve        logged rows: ``step``, ``loss``, each term, ``lr``
+seconds           training time, s; ``n_parameters``, ``n_train_grasps``
+alpha_contact     the contact maps' alpha; ``hand_wrist``: the hand's rest wrist joint, m
+================  ==================================================================================
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import torch
+
+import tohgs
+from tohgs.io import atomic_path
+from tohgs.models.component import Component, build_component
+
+FORMAT = "tohgs.checkpoint"
+FORMAT_VERSION = 1
+REQUIRED = ("component", "kind", "task", "network_config", "training_config", "state_dict", "loss_curve")
+
+
+def save_checkpoint(path: str | Path, model: Component, component: str, task: str, network_config: dict[str, Any],
+                    training_config: dict[str, Any], **extra: Any) -> dict[str, Any]:
+    """Write ``model``'s weights (moved to the CPU) with its metadata to ``path`` atomically; returns the dict.
+    ``extra`` holds the remaining keys of the module table (``loss_curve``, ``seconds``, ...)."""
+    normaliser = getattr(model, "normaliser", None)
+    ckpt = {"format": FORMAT, "format_version": FORMAT_VERSION, "tohgs_version": tohgs.__version__,
+            "component": component, "kind": model.kind, "task": task, "network_config": network_config,
+            "training_config": training_config,
+            "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
+            "normaliser": normaliser() if callable(normaliser) else None, **extra}
+    with atomic_path(path) as tmp:
+        torch.save(ckpt, tmp)
+    return ckpt
+
+
+def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+    """A checkpoint or resume file as a dict, read with ``weights_only=True``: tensors, numbers, strings and
+    containers only, so a file that carries code is refused and nothing in it runs.
+
+    Raises:
+        ValueError: unreadable, or not made of plain data (the message names the file).
+    """
+    path = Path(path)
+    try:
+        obj = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as exc:
+        raise ValueError(f"{path}: not a readable checkpoint of plain data; refused ({type(exc).__name__}: "
+                         f"{str(exc).splitlines()[0] if str(exc) else ''})") from exc
+    if not isinstance(obj, dict):
+        raise ValueError(f"{path}: not a tohgs checkpoint (a {type(obj).__name__}, not a dict)")
+    return obj
+
+
+def load_component(path: str | Path, device: str | torch.device = "cpu") -> tuple[Component, dict[str, Any]]:
+    """The component of a checkpoint (EMA weights, eval mode) and the checkpoint dict.
+
+    Raises:
+        ValueError: not a tohgs checkpoint, one of another format version, or one without a required key.
+    """
+    path = Path(path)
+    ckpt = load_checkpoint(path)
+    if ckpt.get("format") != FORMAT:
+        raise ValueError(f"{path}: not a tohgs checkpoint (no format '{FORMAT}'; one of an older tohgs? retrain it)")
+    if ckpt.get("format_version") != FORMAT_VERSION:
+        raise ValueError(f"{path}: checkpoint format version {ckpt.get('format_version')}, this tohgs reads "
+                         f"{FORMAT_VERSION}; retrain it")
+    missing = [k for k in REQUIRED if k not in ckpt]
+    if missing:
+        raise ValueError(f"{path}: not a tohgs checkpoint (no {missing})")
+    model = build_component(ckpt["kind"], ckpt["network_config"])
+    model.load_state_dict(ckpt["state_dict"])
+    return model.to(device).eval(), ckpt

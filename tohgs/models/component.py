@@ -1,0 +1,78 @@
+"""A component: one trainable network of a method, with its loss and its sampler, found by its kind.
+
+A component of kind ``k`` is the class ``COMPONENT`` of the module ``tohgs.models.<k>`` (ContactDiffuser in
+``tohgs/models/contact_diffuser.py``, GraspDiffuser in ``tohgs/models/grasp_diffuser.py``); its network
+config is the dataclass ``COMPONENT.Config``, documented in the config schema under
+``$defs.networks.<k>``. The config names components under ``components`` (a name, its kind, its network
+and its training budget); one rule trains any of them (:func:`tohgs.models.train.train_component`) into
+``results/models/<task>/<name>.pt`` (:mod:`tohgs.models.checkpoint`).
+
+What a component does, every method on a :class:`tohgs.data.batch.Batch`:
+
+- :meth:`Component.prepare` once before training (set what the data fixes: a normaliser, the hand);
+- :meth:`Component.loss` per training step: a dict whose ``"loss"`` is optimised (other entries are logged;
+  ``w_<term>`` entries are the weighted terms whose gradient shares are logged);
+- a sampler for its role: ``sample_contact`` (a contact source: (B, N) maps) or ``sample_grasps`` (a grasp
+  generator: (B, 51) grasps in the network frame, from a batch that carries contact maps).
+
+Adding a network is one module with a ``COMPONENT`` and its schema block; the training loop, the
+checkpoint and the rules do not change.
+"""
+
+from __future__ import annotations
+
+import importlib
+import re
+from pathlib import Path
+from typing import Any, ClassVar
+
+import torch
+from torch import nn
+
+from tohgs.data.batch import Batch
+
+_MODELS_DIR = Path(__file__).resolve().parent
+_KIND = re.compile(r"[a-z][a-z0-9_]*")
+
+
+class Component(nn.Module):
+    """The interface of a trainable network (subclasses set ``kind`` and ``Config``)."""
+
+    kind: ClassVar[str] = ""
+    Config: ClassVar[type]
+    needs_hand: ClassVar[bool] = False  # the loss poses the hand: training passes the hand model
+
+    def prepare(self, data, task: str, hand=None) -> None:
+        """Set what the training data fixes before the first step (``data``: a
+        :class:`tohgs.data.maps.MapDataset` of the training grasps with the training augmentation; ``task``
+        picks task-specific loss weights). The default does nothing."""
+
+    def loss(self, batch: Batch, generator: torch.Generator) -> dict[str, torch.Tensor]:
+        """The training losses of one batch (``"loss"`` is optimised); draws from ``generator`` only."""
+        raise NotImplementedError(f"{type(self).__name__} has no loss")
+
+
+def kind_exists(kind: str) -> bool:
+    """Whether ``kind`` names a component module (checked without importing it, so without torch)."""
+    return bool(_KIND.fullmatch(kind)) and (_MODELS_DIR / f"{kind}.py").is_file()
+
+
+def component_class(kind: str) -> type[Component]:
+    """The component class of ``kind`` (``tohgs.models.<kind>.COMPONENT``).
+
+    Raises:
+        ValueError: no such module, or it defines no component.
+    """
+    if not kind_exists(kind):
+        known = sorted(p.stem for p in _MODELS_DIR.glob("*.py") if "COMPONENT =" in p.read_text())
+        raise ValueError(f"unknown component kind {kind!r} (known: {', '.join(known)})")
+    cls = getattr(importlib.import_module(f"tohgs.models.{kind}"), "COMPONENT", None)
+    if cls is None or not issubclass(cls, Component):
+        raise ValueError(f"tohgs/models/{kind}.py defines no COMPONENT (a tohgs.models.component.Component)")
+    return cls
+
+
+def build_component(kind: str, network: dict[str, Any]) -> Component:
+    """A fresh, untrained component of ``kind`` from its network config mapping."""
+    cls = component_class(kind)
+    return cls(cls.Config.from_dict(network))
