@@ -250,7 +250,7 @@ def test_a_single_store_is_a_target(smoke_run):
 @contextlib.contextmanager
 def _edited(path: Path):
     """An edit of a source file for the duration of the block; restoring the content undoes the change
-    (Snakemake compares the checksums of small inputs, so nothing needs to rerun afterwards)."""
+    (a rule's code is a param of its modules' content digests, so nothing needs to rerun afterwards)."""
     original = path.read_text()
     time.sleep(1.0)
     path.write_text(original + "# an edit\n")

@@ -9,6 +9,7 @@ config stops Snakemake before any job runs.
 from __future__ import annotations
 
 import copy
+import functools
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,14 @@ class ConfigError(ValueError):
 
 
 def load_schema(path: Path | str = SCHEMA_PATH) -> dict[str, Any]:
-    """Read the YAML JSON-schema of the workflow configuration."""
+    """Read the YAML JSON-schema of the workflow configuration (a fresh copy; the file is parsed once per
+    process and version of the file: the workflow's input functions ask for it per job)."""
+    path = Path(path)
+    return copy.deepcopy(_parsed_schema(path, path.stat().st_mtime_ns))
+
+
+@functools.lru_cache(maxsize=4)
+def _parsed_schema(path: Path, mtime_ns: int) -> dict[str, Any]:
     with open(path) as fh:
         return yaml.safe_load(fh)
 

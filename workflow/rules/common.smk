@@ -1,5 +1,6 @@
 # Configuration validation, the object selection, the components, methods and tables of the config, the
 # derived code inputs and helper functions.
+import hashlib
 import os
 import re
 import sys
@@ -49,14 +50,30 @@ def objects_dir_of_catalog(wildcards, input):
 
 
 def code(script, *modules):
-    """The code inputs of a rule: every tohgs source file its script (``workflow/scripts/<script>``) runs,
-    derived from the imports, plus the modules it loads by name (``"models/grasp_diffuser"``: a component
-    or method kind) and theirs (:mod:`tohgs.code_inputs`). Nothing is listed by hand, so nothing drifts."""
+    """The code a rule's jobs run, as a param: every tohgs source file its script
+    (``workflow/scripts/<script>``) imports, derived from the imports, plus the modules it loads by name
+    (``"models/grasp_diffuser"``: a component or method kind) and theirs (:mod:`tohgs.code_inputs`), each
+    with the digest of its content. An edit of any of them changes the param and makes the jobs stale; a
+    touch does not. A param, not input files: the scheduler stats every input of every ready job on each
+    pass, and a job's thirty modules would make that its main cost. Nothing is listed by hand."""
     try:
         files = code_inputs(REPO / "workflow" / "scripts" / script, modules, REPO)
     except FileNotFoundError as err:
         raise WorkflowError(str(err)) from None
-    return [os.path.relpath(f) for f in files]
+    return {f.relative_to(REPO).as_posix(): _digest(f) for f in files}
+
+
+_DIGESTS = {}  # path -> (mtime, size, digest)
+
+
+def _digest(path):
+    """The SHA-256 (16 hex digits) of a file's content, computed once per version of the file."""
+    st = path.stat()
+    cached = _DIGESTS.get(path)
+    if cached is None or cached[:2] != (st.st_mtime_ns, st.st_size):
+        cached = (st.st_mtime_ns, st.st_size, hashlib.sha256(path.read_bytes()).hexdigest()[:16])
+        _DIGESTS[path] = cached
+    return cached[2]
 
 
 def _canonical(value):
@@ -239,7 +256,8 @@ def method_models(wildcards):
 
 
 def method_code(wildcards):
-    """The code a prediction job of the method runs: the script's, the method kind's, its components' kinds'."""
+    """The code a prediction job of the method runs: the script's, the method kind's, its components' kinds'
+    (:func:`code`)."""
     kinds = [f"methods/{METHODS[wildcards.method]['kind']}"]
     kinds += [f"models/{COMPONENTS[c]['kind']}" for c in components_of(wildcards.method)]
     return code("predict.py", *kinds)

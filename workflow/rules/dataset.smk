@@ -9,10 +9,10 @@ rule task_grasps:
         objects=object_dirs(),
         supports="results/objects/supports",
         hand="results/hand/hand.npz",
-        code=code("task_grasps.py"),
     output:
         directory("results/grasps/task/{task}/{object}.zarr"),
     params:
+        code=code("task_grasps.py"),
         objects_dir=objects_dir_of_supports,
         settings=setting("task_grasps"),
     conda:
@@ -30,10 +30,10 @@ rule maps:
         objects=object_dirs(),
         supports="results/objects/supports",
         hand="results/hand/hand.npz",
-        code=code("maps.py"),
     output:
         directory("results/maps/{task}/{split}/shard-{shard}.zarr"),
     params:
+        code=code("maps.py"),
         objects_dir=objects_dir_of_supports,
         settings=setting("maps", "points"),
         n_shards=lambda w: config["maps"]["shards"][w.split],
@@ -53,9 +53,10 @@ rule dataset_summary:
     input:
         task_grasps=all_task_grasps,
         shards=all_map_shards,
-        code=code("dataset_summary.py"),
     output:
         "results/maps/summary.csv",
+    params:
+        code=code("dataset_summary.py"),
     conda:
         "../envs/tohgs.yaml"
     log:
@@ -68,9 +69,10 @@ rule maps_figure:
     input:
         shards=all_map_shards,
         hand="results/hand/hand.npz",
-        code=code("maps_figure.py"),
     output:
         report("results/figures/maps.png", caption="../report/maps.rst", category="Dataset"),
+    params:
+        code=code("maps_figure.py"),
     conda:
         "../envs/tohgs.yaml"
     log:

@@ -9,10 +9,10 @@ rule evaluate:
         objects=object_dirs(),
         supports="results/objects/supports",
         hand="results/hand/hand.npz",
-        code=code("evaluate.py"),
     output:
         "results/metrics/{task}/{method}.parquet",
     params:
+        code=code("evaluate.py"),
         objects_dir=objects_dir_of_supports,
         sd=setting("metrics", "sd"),
         voxel_pitch=setting("metrics", "voxel_pitch"),
@@ -31,12 +31,12 @@ rule evaluate:
 rule table:
     input:
         metrics=table_metrics,
-        code=code("table.py"),
     output:
         csv=report("results/tables/{table}.csv", caption="../report/table.rst", category="Tables"),
         md="results/tables/{table}.md",
         grid=report("results/tables/{table}_qr_grid.csv", caption="../report/qr_grid.rst", category="Tables"),
     params:
+        code=code("table.py"),
         tasks=setting("scenes", "tasks"),
         rows=lambda w: setting("tables", w.table, "rows"),
         labels=lambda w: {m: METHODS[m]["label"] for m in TABLES[w.table]["rows"]},
@@ -58,10 +58,10 @@ rule predictions_figure:
         objects=object_dirs(),
         supports="results/objects/supports",
         hand="results/hand/hand.npz",
-        code=code("predictions_figure.py"),
     output:
         report("results/figures/predictions_{task}.png", caption="../report/predictions.rst", category="Evaluation"),
     params:
+        code=code("predictions_figure.py"),
         objects_dir=objects_dir_of_supports,
         configs=setting("figures", "prediction_configs"),
     conda:
@@ -77,10 +77,10 @@ rule contact_maps_figure:
         predictions=expand("results/predictions/{task}/{method}.zarr", task=config["scenes"]["tasks"],
                            method=config["figures"]["method"]),
         shards=all_test_shards,
-        code=code("contact_maps_figure.py"),
     output:
         report("results/figures/contact_maps.png", caption="../report/contact_maps.rst", category="Evaluation"),
     params:
+        code=code("contact_maps_figure.py"),
         configs=setting("figures", "prediction_configs"),
     conda:
         "../envs/tohgs.yaml"

@@ -6,10 +6,10 @@ rule prior_synthesis:
     input:
         object="results/objects/{object}",
         hand="results/hand/hand.npz",
-        code=code("prior_synthesis.py"),
     output:
         directory("results/grasps/prior/raw/{object}.zarr"),
     params:
+        code=code("prior_synthesis.py"),
         synthesis=setting("prior_grasps", "synthesis"),
         sdf=setting("prior_grasps", "sdf"),
         sd=setting("metrics", "sd"),
@@ -32,10 +32,10 @@ rule prior_synthesis:
 rule prior_filter:
     input:
         raw="results/grasps/prior/raw/{object}.zarr",
-        code=code("prior_filter.py"),
     output:
         directory("results/grasps/prior/{object}.zarr"),
     params:
+        code=code("prior_filter.py"),
         thresholds=setting("prior_grasps", "filter"),
     conda:
         "../envs/tohgs.yaml"
@@ -48,9 +48,10 @@ rule prior_filter:
 rule prior_summary:
     input:
         stores=prior_stores,
-        code=code("prior_summary.py"),
     output:
         "results/grasps/prior/summary.csv",
+    params:
+        code=code("prior_summary.py"),
     conda:
         "../envs/tohgs.yaml"
     log:
@@ -64,10 +65,10 @@ rule prior_figure:
         stores=prior_stores,
         catalog="results/objects/catalog.csv",
         hand="results/hand/hand.npz",
-        code=code("prior_figure.py"),
     output:
         report("results/figures/prior_grasps.png", caption="../report/prior_grasps.rst", category="Prior grasps"),
     params:
+        code=code("prior_figure.py"),
         objects_dir=objects_dir_of_catalog,
         n_objects=setting("figures", "prior_objects"),
     conda:

@@ -4,10 +4,10 @@
 rule hand_model:
     input:
         source=hand_source,
-        code=code("hand_model.py"),
     output:
         "results/hand/hand.npz",
     params:
+        code=code("hand_model.py"),
         model=setting("hand", "model"),
         mano_path=setting("hand", "mano_path"),
         cache_dir=setting("cache_dir"),
@@ -22,9 +22,10 @@ rule hand_model:
 rule hand_figure:
     input:
         hand="results/hand/hand.npz",
-        code=code("hand_figure.py"),
     output:
         report("results/figures/hand.png", caption="../report/hand.rst", category="Hand"),
+    params:
+        code=code("hand_figure.py"),
     conda:
         "../envs/tohgs.yaml"
     log:

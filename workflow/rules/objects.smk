@@ -5,10 +5,10 @@
 rule prepare_object:
     input:
         source=object_source,
-        code=code("prepare_object.py"),
     output:
         directory("results/objects/{object}"),
     params:
+        code=code("prepare_object.py"),
         spec=object_spec,
         size=object_size,
         density=setting("objects", "density"),
@@ -27,10 +27,10 @@ rule prepare_object:
 checkpoint catalog:
     input:
         objects=object_dirs(),
-        code=code("catalog.py"),
     output:
         "results/objects/catalog.csv",
     params:
+        code=code("catalog.py"),
         split=setting("objects", "split"),
         seed=setting("seed"),
         task_sets=TASK_SETS,
@@ -43,11 +43,10 @@ checkpoint catalog:
 
 
 rule supports:
-    input:
-        code=code("supports.py"),
     output:
         directory("results/objects/supports"),
     params:
+        code=code("supports.py"),
         table=setting("objects", "supports", "table"),
         shelves=setting("objects", "supports", "shelves"),
     conda:
@@ -62,10 +61,10 @@ rule objects_figure:
     input:
         catalog="results/objects/catalog.csv",
         objects=object_dirs(),
-        code=code("objects_figure.py"),
     output:
         report("results/figures/objects.png", caption="../report/objects.rst", category="Objects"),
     params:
+        code=code("objects_figure.py"),
         max_objects=setting("figures", "max_objects"),
         seed=setting("seed"),
     conda:

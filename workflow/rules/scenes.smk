@@ -6,10 +6,10 @@ rule scenes:
     input:
         objects=object_dirs(),
         supports="results/objects/supports",
-        code=code("scenes.py"),
     output:
         directory("results/scenes/{task}/{object}.zarr"),
     params:
+        code=code("scenes.py"),
         objects_dir=objects_dir_of_supports,
         settings=scene_settings,
         seed=setting("seed"),
@@ -27,10 +27,10 @@ rule scenes_figure:
     input:
         scenes=scene_stores,
         supports="results/objects/supports",
-        code=code("scenes_figure.py"),
     output:
         report("results/figures/scenes_{task}.png", caption="../report/scenes.rst", category="Scenes"),
     params:
+        code=code("scenes_figure.py"),
         objects_dir=objects_dir_of_supports,
         max_configs=setting("figures", "scene_configs"),
     conda:

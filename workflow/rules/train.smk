@@ -5,11 +5,11 @@ rule train:
     input:
         shards=train_shards,
         hand="results/hand/hand.npz",
-        code=lambda w: code("train.py", f"models/{COMPONENTS[w.component]['kind']}"),
     output:
         model="results/models/{task}/{component}.pt",
         curve=report("results/models/{task}/{component}.png", caption="../report/training.rst", category="Training"),
     params:
+        code=lambda w: code("train.py", f"models/{COMPONENTS[w.component]['kind']}"),
         kind=lambda w: COMPONENTS[w.component]["kind"],
         network=lambda w: _canonical(COMPONENTS[w.component]["network"]),
         settings=component_settings,
@@ -30,10 +30,10 @@ rule predict:
     input:
         shards=test_shards,
         models=method_models,
-        code=method_code,
     output:
         directory("results/predictions/{task}/{method}.zarr"),
     params:
+        code=method_code,
         method=method_block,
         settings=method_settings,
     threads: config["prediction"]["threads"]
@@ -52,10 +52,10 @@ rule model_checks:
         shards=train_shards,
         models=lambda w: [f"results/models/{w.task}/{c}.pt" for c in checked_components()],
         hand="results/hand/hand.npz",
-        code=code("model_checks.py", "models/contact_diffuser", "models/grasp_diffuser"),
     output:
         "results/models/{task}/checks.json",
     params:
+        code=code("model_checks.py", "models/contact_diffuser", "models/grasp_diffuser"),
         seed=setting("training", "seed"),
     conda:
         "../envs/tohgs.yaml"
