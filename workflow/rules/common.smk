@@ -1,5 +1,5 @@
 # Configuration validation, the object selection, the components, methods and tables of the config, the
-# derived code inputs and helper functions.
+# derived code of each rule and helper functions.
 import hashlib
 import os
 import re
