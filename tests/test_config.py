@@ -55,6 +55,7 @@ def test_defaults_are_filled_in_place():
         ({"objects": {"sources": {"pybullet_data": {"random_urdfs": 0, "named": 0}, "bricks": {"count": 0}}}},
          "objects.sources", "empty"),
         ({"components": {"cvae": {"kind": "grasp_cvae"}}}, "components.cvae.kind", "unknown component kind"),
+        ({"components": {"My Net": {"kind": "grasp_diffuser"}}}, "components", "does not match"),
         ({"components": {"contact_diffuser": {"network": {"d_modle": 8}}}}, "components.contact_diffuser.network.d_modle",
          "unknown key"),
         ({"components": {"grasp_diffuser": {"training": {"step": 3}}}}, "components.grasp_diffuser.training.step",
