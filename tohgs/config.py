@@ -9,13 +9,15 @@ config stops Snakemake before any job runs.
 from __future__ import annotations
 
 import copy
-import functools
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 import jsonschema
 import yaml
+
+from tohgs.methods import method_kind_exists
+from tohgs.models import component_kind_exists
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SCHEMA_PATH = REPO_ROOT / "workflow" / "schemas" / "config.schema.yaml"
@@ -26,14 +28,7 @@ class ConfigError(ValueError):
 
 
 def load_schema(path: Path | str = SCHEMA_PATH) -> dict[str, Any]:
-    """Read the YAML JSON-schema of the workflow configuration (a fresh copy; the file is parsed once per
-    process and version of the file: the workflow's input functions ask for it per job)."""
-    path = Path(path)
-    return copy.deepcopy(_parsed_schema(path, path.stat().st_mtime_ns))
-
-
-@functools.lru_cache(maxsize=4)
-def _parsed_schema(path: Path, mtime_ns: int) -> dict[str, Any]:
+    """Read the YAML JSON-schema of the workflow configuration."""
     with open(path) as fh:
         return yaml.safe_load(fh)
 
@@ -160,7 +155,7 @@ def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -
     roles = {}
     for name, comp in cfg["components"].items():
         kind, where = comp["kind"], f"components.{name}"
-        if kind not in networks or not (REPO_ROOT / "tohgs" / "models" / f"{kind}.py").is_file():
+        if kind not in networks or not component_kind_exists(kind):
             raise ConfigError(f"config key '{where}.kind': unknown component kind {kind!r} (known: {', '.join(sorted(networks))})")
         _fill_defaults(comp["network"], networks[kind])
         _validate_part(comp["network"], networks[kind], f"{where}.network")
@@ -168,7 +163,7 @@ def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -
         roles[name] = networks[kind].get("x-role")
     for name, method in cfg["methods"].items():
         kind, where = method["kind"], f"methods.{name}"
-        if kind not in method_kinds or not (REPO_ROOT / "tohgs" / "methods" / f"{kind}.py").is_file():
+        if kind not in method_kinds or not method_kind_exists(kind):
             raise ConfigError(f"config key '{where}.kind': unknown method kind {kind!r} (known: {', '.join(sorted(method_kinds))})")
         _validate_part(method["settings"], _overlay_schema(props["prediction"]), f"{where}.settings")
         keys = method_kinds[kind].get("keys", {})

@@ -28,7 +28,8 @@ import trimesh
 
 from tohgs.assets.bricks import make_brick
 from tohgs.assets.decomposition import DecompositionSettings, convex_decomposition
-from tohgs.assets.mesh import MeshError, choose_scale, load_mesh, mass_properties, normalise, repair_and_validate
+from tohgs.assets.mesh import (OBJECT_MESH, MeshError, choose_scale, load_mesh, mass_properties, normalise,
+                               repair_and_validate)
 from tohgs.assets.sources import TASK_SET_BRICKS, TASK_SET_OBJECTS, ObjectSpec, read_object_meta
 from tohgs.io import atomic_dir, atomic_path, write_json
 
@@ -131,7 +132,7 @@ def prepare_object(spec: dict[str, Any] | ObjectSpec, out_dir: str | Path, size:
         settings = DecompositionSettings(**decomposition)
         parts, method = convex_decomposition(mesh, settings, cache_dir)
         mp = mass_properties(mesh, density)
-        mesh.export(tmp / "mesh.obj")
+        mesh.export(tmp / OBJECT_MESH)
         _write_obj_parts(tmp / "collision.obj", parts)
         (tmp / "object.urdf").write_text(_urdf(spec.name, mp.mass, mp.inertia))
         meta.update(

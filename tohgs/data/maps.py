@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from tohgs.data.store import read_store, write_store
+from tohgs.data.store import check_shapes, read_store, write_store
 from tohgs.geometry.grasp import GRASP_DIM
 
 SCHEMA = "tohgs.maps"
@@ -97,9 +97,8 @@ class MapShard:
                   "d_goal": (c, n), "scene": (c, ns, 3), "centroid": (c, 3),
                   "goal_transform": (c, 4, 4), "grasp_config": (g,), "grasp_prior_index": (g,), "grasp": (g, GRASP_DIM),
                   "contact": (g, n)}
-        for name, shape in expect.items():
-            if a[name].shape != shape:
-                raise ValueError(f"{source}: array '{name}' has shape {a[name].shape}, expected {shape}")
+        check_shapes(a, expect, source)
+        for name in expect:
             if a[name].dtype != ARRAYS[name][1]:
                 raise ValueError(f"{source}: array '{name}' has dtype {a[name].dtype}, expected {np.dtype(ARRAYS[name][1])}")
         if g and (a["grasp_config"].min() < 0 or a["grasp_config"].max() >= c):

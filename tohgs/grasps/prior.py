@@ -24,7 +24,7 @@ import numpy as np
 import torch
 import trimesh
 
-from tohgs.assets.mesh import object_mesh
+from tohgs.assets.mesh import OBJECT_MESH, object_mesh
 from tohgs.config import settings_from
 from tohgs.data.grasps import ENERGY_TERMS, PriorGrasps, write_prior_grasps
 from tohgs.geometry.sdf import SDFGrid
@@ -98,9 +98,8 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
     object_dir = Path(object_dir)
     name = object_dir.name
     mesh = object_mesh(object_dir.parent, name)
-    mesh_path = object_dir / "mesh.obj"
     if not mesh.is_watertight:
-        raise ValueError(f"{mesh_path}: the object mesh is not watertight (SDF and PV need a closed surface)")
+        raise ValueError(f"{object_dir / OBJECT_MESH}: the object mesh is not watertight (SDF and PV need a closed surface)")
     s_syn = settings_from(SynthesisSettings, {**synthesis, "plane_direction": plane_direction})
     s_sdf = settings_from(SDFSettings, sdf)
     s_sd = settings_from(SDSettings, sd)

@@ -149,11 +149,9 @@ class DisplacementSimulator:
         from tohgs.sim.client import DirectClient
 
         self._client = DirectClient()
-        self._pb, self.cid = self._client._pb, self._client.cid
 
     def close(self) -> None:
         self._client.close()
-        self.cid = None
 
     def __enter__(self) -> "DisplacementSimulator":
         return self
@@ -171,7 +169,7 @@ class DisplacementSimulator:
             object_pose: the object's mesh-frame pose ``[x, y, z, qx, qy, qz, qw]`` (default: identity).
             gravity: (3,) m/s^2 for this hand (default: the settings' ``gravity``).
         """
-        pb, s, cid = self._pb, self.settings, self.cid
+        pb, s, cid = self._client._pb, self.settings, self._client.cid
         g = np.asarray(s.gravity if gravity is None else gravity, dtype=np.float64)
         try:
             self._client.reset_simulation(g.tolist(), s.time_step, s.solver_iterations)

@@ -26,9 +26,10 @@ import torch
 from tohgs.data.maps import MapDataset
 from tohgs.hand.model import HandModel
 from tohgs.hand.rotations import axis_angle_to_matrix
-from tohgs.models.diffusion import NoiseSchedule, sample
 from tohgs.data.batch import Batch
+from tohgs.models import CHECKED_KINDS
 from tohgs.models.checkpoint import load_component
+from tohgs.models.diffusion import sample
 from tohgs.models.grasp_diffuser import GraspCondition
 
 log = logging.getLogger(__name__)
@@ -74,7 +75,7 @@ def shuffled_condition_gap(model, data: MapDataset, n_samples: int = 256, seed: 
             break
         perm[same] = perm[same][torch.randperm(int(same.sum()), generator=g)]
         perm = torch.where(perm == torch.arange(n_samples), perm.roll(1), perm)
-    sched = NoiseSchedule(model.diffusion)
+    sched = model.schedule
     shuffled = batch.index(perm)
     grasps = model.kind == "grasp_diffuser"
     if grasps:
@@ -229,9 +230,6 @@ def contact_fit(model, data: MapDataset, max_configs: int = 24, samples: int = 4
             "true_contact_fraction": float(np.mean(true_frac)) if true_frac else math.nan}
 
 
-CHECKS = ("contact_diffuser", "grasp_diffuser")  # the component kinds these measurements apply to
-
-
 def model_checks(task: str, shard_paths: list[str | Path], checkpoints: dict[str, str | Path], hand: HandModel,
                  out: str | Path, seed: int = 0) -> dict:
     """Both measurements for each of a task's trained diffusers (``checkpoints``: by component name) on their
@@ -243,7 +241,7 @@ def model_checks(task: str, shard_paths: list[str | Path], checkpoints: dict[str
     plain = MapDataset(shard_paths, per="grasp", rotation="none")
     for name, ckpt in checkpoints.items():
         model, meta = load_component(ckpt)
-        if model.kind not in CHECKS:
+        if model.kind not in CHECKED_KINDS:
             result[name] = {"kind": model.kind, "checks": "none for this kind"}
             continue
         # the gap is measured on what the model was trained on: its own augmentation

@@ -22,17 +22,14 @@ checkpoint and the rules do not change.
 from __future__ import annotations
 
 import importlib
-import re
-from pathlib import Path
 from typing import Any, ClassVar
 
 import torch
 from torch import nn
 
 from tohgs.data.batch import Batch
+from tohgs.models import component_kind_exists, component_kinds
 
-_MODELS_DIR = Path(__file__).resolve().parent
-_KIND = re.compile(r"[a-z][a-z0-9_]*")
 
 
 class Component(nn.Module):
@@ -52,20 +49,14 @@ class Component(nn.Module):
         raise NotImplementedError(f"{type(self).__name__} has no loss")
 
 
-def kind_exists(kind: str) -> bool:
-    """Whether ``kind`` names a component module (checked without importing it, so without torch)."""
-    return bool(_KIND.fullmatch(kind)) and (_MODELS_DIR / f"{kind}.py").is_file()
-
-
 def component_class(kind: str) -> type[Component]:
     """The component class of ``kind`` (``tohgs.models.<kind>.COMPONENT``).
 
     Raises:
         ValueError: no such module, or it defines no component.
     """
-    if not kind_exists(kind):
-        known = sorted(p.stem for p in _MODELS_DIR.glob("*.py") if "COMPONENT =" in p.read_text())
-        raise ValueError(f"unknown component kind {kind!r} (known: {', '.join(known)})")
+    if not component_kind_exists(kind):
+        raise ValueError(f"unknown component kind {kind!r} (known: {', '.join(component_kinds())})")
     cls = getattr(importlib.import_module(f"tohgs.models.{kind}"), "COMPONENT", None)
     if cls is None or not issubclass(cls, Component):
         raise ValueError(f"tohgs/models/{kind}.py defines no COMPONENT (a tohgs.models.component.Component)")

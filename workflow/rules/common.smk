@@ -13,13 +13,15 @@ if str(REPO) not in sys.path:  # parse time only; jobs import the installed pack
     sys.path.insert(0, str(REPO))
 
 from tohgs.code_inputs import code_inputs
-from tohgs.config import ConfigError, method_setting_keys, validate_config
+from tohgs.config import ConfigError, load_schema, method_setting_keys, validate_config
 from tohgs.assets.objects import check_split_sizes, read_catalog
 from tohgs.assets.sources import select_objects, task_set
 from tohgs.methods import method_components
+from tohgs.models import CHECKED_KINDS
 
+_SCHEMA = load_schema()
 try:
-    validate_config(config)
+    validate_config(config, _SCHEMA)
 except ConfigError as err:
     raise WorkflowError(f"invalid configuration: {err}") from None
 
@@ -49,31 +51,24 @@ def objects_dir_of_catalog(wildcards, input):
     return os.path.dirname(input.catalog)
 
 
+_CODE = {}  # (script, modules) -> the code param: a workflow process reads each file once
+
+
 def code(script, *modules):
     """The code a rule's jobs run, as a param: every tohgs source file its script
     (``workflow/scripts/<script>``) imports, derived from the imports, plus the modules it loads by name
     (``"models/grasp_diffuser"``: a component or method kind) and theirs (:mod:`tohgs.code_inputs`), each
-    with the digest of its content. An edit of any of them changes the param and makes the jobs stale; a
-    touch does not. A param, not input files: the scheduler stats every input of every ready job on each
-    pass, and a job's thirty modules would make that its main cost. Nothing is listed by hand."""
-    try:
-        files = code_inputs(REPO / "workflow" / "scripts" / script, modules, REPO)
-    except FileNotFoundError as err:
-        raise WorkflowError(str(err)) from None
-    return {f.relative_to(REPO).as_posix(): _digest(f) for f in files}
-
-
-_DIGESTS = {}  # path -> (mtime, size, digest)
-
-
-def _digest(path):
-    """The SHA-256 (16 hex digits) of a file's content, computed once per version of the file."""
-    st = path.stat()
-    cached = _DIGESTS.get(path)
-    if cached is None or cached[:2] != (st.st_mtime_ns, st.st_size):
-        cached = (st.st_mtime_ns, st.st_size, hashlib.sha256(path.read_bytes()).hexdigest()[:16])
-        _DIGESTS[path] = cached
-    return cached[2]
+    with the SHA-256 (16 hex digits) of its content. An edit of any of them changes the param and makes the
+    jobs stale; a touch does not. A param, not input files: the scheduler stats every input of every ready
+    job on each pass, and a job's thirty modules would make that its main cost. Nothing is listed by hand."""
+    key = (script, modules)
+    if key not in _CODE:
+        try:
+            files = code_inputs(REPO / "workflow" / "scripts" / script, modules, REPO)
+        except FileNotFoundError as err:
+            raise WorkflowError(str(err)) from None
+        _CODE[key] = {f.relative_to(REPO).as_posix(): hashlib.sha256(f.read_bytes()).hexdigest()[:16] for f in files}
+    return _CODE[key]
 
 
 def _canonical(value):
@@ -237,11 +232,15 @@ def component_settings(wildcards):
     return _canonical({**config["training"], **COMPONENTS[wildcards.component]["training"]})
 
 
+# The prediction settings each method kind reads (None: all), from the schema, once.
+_SETTING_KEYS = {kind: method_setting_keys(kind, _SCHEMA) for kind in {m["kind"] for m in METHODS.values()}}
+
+
 def method_settings(wildcards):
     """The sampling settings of one method: the prediction block overlaid with the method's own, only those
     its kind reads (so a sampler setting leaves the dataset row's draw be)."""
     settings = {**config["prediction"], **METHODS[wildcards.method]["settings"]}
-    keys = method_setting_keys(METHODS[wildcards.method]["kind"])
+    keys = _SETTING_KEYS[METHODS[wildcards.method]["kind"]]
     return _canonical({k: v for k, v in settings.items() if keys is None or k in keys})
 
 
@@ -264,8 +263,8 @@ def method_code(wildcards):
 
 
 def checked_components():
-    """The used components whose kinds have checks (tohgs.models.checks.CHECKS: the diffusers)."""
-    return [c for c in used_components() if COMPONENTS[c]["kind"] in ("contact_diffuser", "grasp_diffuser")]
+    """The used components whose kinds have checks (tohgs.models.CHECKED_KINDS: the diffusers)."""
+    return [c for c in used_components() if COMPONENTS[c]["kind"] in CHECKED_KINDS]
 
 
 def train_shards(wildcards):

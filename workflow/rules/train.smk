@@ -55,7 +55,7 @@ rule model_checks:
     output:
         "results/models/{task}/checks.json",
     params:
-        code=code("model_checks.py", "models/contact_diffuser", "models/grasp_diffuser"),
+        code=code("model_checks.py", *(f"models/{kind}" for kind in CHECKED_KINDS)),
         seed=setting("training", "seed"),
     conda:
         "../envs/tohgs.yaml"
