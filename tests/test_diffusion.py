@@ -188,7 +188,8 @@ def test_contact_diffuser_trains_on_the_target_its_config_names(prediction):
     batch, sched = _contact_batch(), NoiseSchedule(model.diffusion)
     with torch.no_grad():
         typed = Batch(points=batch["points"], normals=batch["normals"], d_init=batch["d_init"], d_goal=batch["d_goal"],
-                      scene=torch.zeros(2, 4, 3), goal_transform=torch.eye(4).expand(2, 4, 4), contact=batch["contact"])
+                      scene=torch.zeros(2, 4, 3), scene_normals=torch.zeros(2, 4, 3),
+                      goal_transform=torch.eye(4).expand(2, 4, 4), contact=batch["contact"])
         loss = model.loss(typed, torch.Generator().manual_seed(3))["loss"]
         g = torch.Generator().manual_seed(3)
         t = torch.randint(0, sched.timesteps, (2,), generator=g)

@@ -13,7 +13,7 @@ import trimesh
 from tohgs.assets.bricks import make_brick
 from tohgs.assets.supports import write_supports
 from tohgs.data.build_maps import make_map_shard, shard_items
-from tohgs.data.maps import MapDataset, read_map_shard
+from tohgs.data.maps import SCHEMA_VERSION, MapDataset, read_map_shard
 from tohgs.data.scenes import write_scenes
 from tohgs.data.task_grasps import write_task_grasps
 from tohgs.geometry.maps import (farthest_point_sampling, farthest_point_sampling_reference, nearest_distance, nearest_distance_brute, normalised_map,
@@ -55,8 +55,14 @@ def test_farthest_point_sampling_covers_better_than_random():
     cover_fps = nearest_distance(pts, pts[idx]).max()
     cover_rand = nearest_distance(pts, pts[rng.choice(3000, 100, replace=False)]).max()
     assert cover_fps < 0.75 * cover_rand
-    cloud = scene_cloud([trimesh.creation.box(extents=[1, 1, 0.05])], 256, np.random.default_rng(0))
-    assert cloud.shape == (256, 3)
+    cloud, normals = scene_cloud([trimesh.creation.box(extents=[1, 1, 0.05])], 256, np.random.default_rng(0))
+    assert cloud.shape == (256, 3) and normals.shape == (256, 3)
+    # each normal is the outward normal of the face its point lies on: a top point's is +z, a side's horizontal
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-6)
+    top = cloud[:, 2] > 0.0249
+    assert top.any() and np.allclose(normals[top], [0, 0, 1], atol=1e-6)
+    side = np.abs(cloud[:, 0]) > 0.4999
+    assert side.any() and np.allclose(np.abs(normals[side, 0]), 1.0, atol=1e-6)
 
 
 def test_farthest_point_sampling_matches_the_numpy_reference():
@@ -158,7 +164,7 @@ def test_same_seed_same_shard_and_broken_shards_are_refused(built):
     with pytest.raises(ValueError, match=r"bad.zarr: array 'points' is unreadable or truncated"):
         read_map_shard(bad)
     meta = bad / "zarr.json"
-    meta.write_text(meta.read_text().replace('"schema_version": 1', '"schema_version": 99'))
+    meta.write_text(meta.read_text().replace(f'"schema_version": {SCHEMA_VERSION}', '"schema_version": 99'))
     with pytest.raises(ValueError, match="bad.zarr: schema version 99"):
         read_map_shard(bad)
 

@@ -11,6 +11,7 @@ points          (B, N, 3)    object surface points at the initial pose, m
 normals         (B, N, 3)    their outward unit normals
 d_init, d_goal  (B, N)       distance maps (alpha 30) to the initial / goal scene, in [0, 1]
 scene           (B, Ns, 3)   scene cloud (support, obstacles, base; never the target), m
+scene_normals   (B, Ns, 3)   the scene points' outward unit normals
 goal_transform  (B, 4, 4)    ``T_goal T_init^-1`` in the network frame (carries the target)
 contact         (B, N)       contact map (alpha 100) of the grasp's hand, in [0, 1]; or None
 grasp           (B, 51)      the grasp at the initial pose (:data:`tohgs.geometry.grasp.GRASP_DIM`); or None
@@ -42,6 +43,7 @@ class Batch:
     d_init: torch.Tensor
     d_goal: torch.Tensor
     scene: torch.Tensor
+    scene_normals: torch.Tensor
     goal_transform: torch.Tensor
     contact: torch.Tensor | None = None
     grasp: torch.Tensor | None = None
@@ -102,3 +104,7 @@ class Batch:
     def scene_goal(self) -> torch.Tensor:
         """(B, Ns + N, 3) the goal scene: the scene cloud and the target at its goal pose, m."""
         return torch.cat([self.scene, self.object_at_goal()], 1)
+
+    def normals_at_goal(self) -> torch.Tensor:
+        """(B, N, 3) the object normals turned to the goal pose."""
+        return self.normals @ self.goal_transform[:, :3, :3].transpose(-1, -2)

@@ -123,7 +123,7 @@ def make_map_shard(task: str, split: str, shard: int, n_shards: int, scene_store
     clouds: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     mesh_cache: dict[str, trimesh.Trimesh] = {}
     cfg_rows: dict[str, list] = {k: [] for k in ("object_id", "config_index", "points", "normals", "d_init", "d_goal",
-                                                  "scene", "centroid", "goal_transform")}
+                                                  "scene", "scene_normals", "centroid", "goal_transform")}
     g_rows: dict[str, list] = {k: [] for k in ("grasp_config", "grasp_prior_index", "grasp", "contact")}
     try:
         from tqdm import tqdm
@@ -141,7 +141,7 @@ def make_map_shard(task: str, split: str, shard: int, n_shards: int, scene_store
         p_goal = pts @ T_goal[:3, :3].T + T_goal[:3, 3]
         centroid = p_init.mean(0)
         rng = np.random.default_rng([int(seed), zlib.crc32(f"{task}/{name}/{c}".encode())])
-        cloud = scene_cloud(scene_meshes(sc, c, objects_dir, supports, mesh_cache), s.n_scene_points, rng,
+        cloud, cloud_normals = scene_cloud(scene_meshes(sc, c, objects_dir, supports, mesh_cache), s.n_scene_points, rng,
                             centres=np.stack([T_init[:3, 3], T_goal[:3, 3]]), radius=s.scene_radius)
         row = len(cfg_rows["object_id"])
         cfg_rows["object_id"].append(vocab.index(name))
@@ -151,6 +151,7 @@ def make_map_shard(task: str, split: str, shard: int, n_shards: int, scene_store
         cfg_rows["d_init"].append(normalised_map(nearest_distance(p_init, cloud), s.alpha_distance))
         cfg_rows["d_goal"].append(normalised_map(nearest_distance(p_goal, cloud), s.alpha_distance))
         cfg_rows["scene"].append(cloud - centroid)
+        cfg_rows["scene_normals"].append(cloud_normals)
         cfg_rows["centroid"].append(centroid)
         cfg_rows["goal_transform"].append(T_goal @ np.linalg.inv(T_init))
         g = grasps[name]
@@ -176,7 +177,8 @@ def make_map_shard(task: str, split: str, shard: int, n_shards: int, scene_store
         "object_id": np.asarray(cfg_rows["object_id"], np.int32), "config_index": np.asarray(cfg_rows["config_index"], np.int32),
         "points": stack(cfg_rows["points"], (n, 3), np.float32), "normals": stack(cfg_rows["normals"], (n, 3), np.float32),
         "d_init": stack(cfg_rows["d_init"], (n,), np.float32), "d_goal": stack(cfg_rows["d_goal"], (n,), np.float32),
-        "scene": stack(cfg_rows["scene"], (ns, 3), np.float32), "centroid": stack(cfg_rows["centroid"], (3,), np.float64),
+        "scene": stack(cfg_rows["scene"], (ns, 3), np.float32),
+        "scene_normals": stack(cfg_rows["scene_normals"], (ns, 3), np.float32), "centroid": stack(cfg_rows["centroid"], (3,), np.float64),
         "goal_transform": stack(cfg_rows["goal_transform"], (4, 4), np.float64),
         "grasp_config": np.asarray(g_rows["grasp_config"], np.int32),
         "grasp_prior_index": np.asarray(g_rows["grasp_prior_index"], np.int32),

@@ -15,6 +15,8 @@ normals            (C, N, 3)     config, point, xyz    their outward unit normal
 d_init, d_goal     (C, N)        config, point         distance maps (alpha 30) in the initial / goal scene
 scene              (C, Ns, 3)    config, scene_point,  scene cloud: support, obstacles and base, never the
                                  xyz                   target (the same in the initial and goal scene), m
+scene_normals      (C, Ns, 3)    config, scene_point,  the scene points' outward unit normals (the faces
+                                 xyz                   they were sampled on)
 centroid           (C, 3)        config, xyz           world position of the network frame's origin, m
 goal_transform     (C, 4, 4)     config, row, col      T_goal T_init^-1: carries the target (and a hand
                                                        holding it) from its initial to its goal pose
@@ -43,7 +45,7 @@ from tohgs.data.store import check_shapes, read_store, write_store
 from tohgs.geometry.grasp import GRASP_DIM
 
 SCHEMA = "tohgs.maps"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: scene_normals
 CHUNK = 64
 
 # name: (dimension names, dtype, "config" | "grasp")
@@ -55,6 +57,7 @@ ARRAYS: dict[str, tuple[tuple[str, ...], type, str]] = {
     "d_init": (("config", "point"), np.float32, "config"),
     "d_goal": (("config", "point"), np.float32, "config"),
     "scene": (("config", "scene_point", "xyz"), np.float32, "config"),
+    "scene_normals": (("config", "scene_point", "xyz"), np.float32, "config"),
     "centroid": (("config", "xyz"), np.float64, "config"),
     "goal_transform": (("config", "row", "col"), np.float64, "config"),
     "grasp_config": (("grasp",), np.int32, "grasp"),
@@ -94,7 +97,7 @@ class MapShard:
         c, g = len(a["object_id"]), len(a["grasp"])
         n, ns = a["points"].shape[1], a["scene"].shape[1]
         expect = {"object_id": (c,), "config_index": (c,), "points": (c, n, 3), "normals": (c, n, 3), "d_init": (c, n),
-                  "d_goal": (c, n), "scene": (c, ns, 3), "centroid": (c, 3),
+                  "d_goal": (c, n), "scene": (c, ns, 3), "scene_normals": (c, ns, 3), "centroid": (c, 3),
                   "goal_transform": (c, 4, 4), "grasp_config": (g,), "grasp_prior_index": (g,), "grasp": (g, GRASP_DIM),
                   "contact": (g, n)}
         check_shapes(a, expect, source)
@@ -195,6 +198,7 @@ class MapDataset:
         item: dict[str, Any] = {
             "points": sh.points[c].astype(np.float32), "normals": sh.normals[c].astype(np.float32),
             "d_init": sh.d_init[c], "d_goal": sh.d_goal[c], "scene": sh.scene[c],
+            "scene_normals": sh.scene_normals[c],
             "goal_transform": network_goal_transform(sh.goal_transform[c], sh.centroid[c]).astype(np.float32),
             "object_id": int(sh.object_id[c]), "config_index": int(sh.config_index[c]), "shard": s, "row": row}
         if self.per == "grasp":
@@ -205,6 +209,7 @@ class MapDataset:
             item["points"] = (item["points"] @ R.T).astype(np.float32)
             item["normals"] = (item["normals"] @ R.T).astype(np.float32)
             item["scene"] = (item["scene"] @ R.T).astype(np.float32)
+            item["scene_normals"] = (item["scene_normals"] @ R.T).astype(np.float32)
             T = np.eye(4)
             T[:3, :3] = R
             item["goal_transform"] = (T @ item["goal_transform"] @ T.T).astype(np.float32)

@@ -94,9 +94,11 @@ def farthest_point_sampling_reference(points: np.ndarray, k: int, start: int = 0
 
 
 def scene_cloud(meshes: list[trimesh.Trimesh], n: int, rng: np.random.Generator, oversample: int = 4,
-                centres: np.ndarray | None = None, radius: float = 0.0) -> np.ndarray:
-    """(n, 3) points of the merged scene meshes: area-weighted samples, then farthest-point sampling to
-    ``n`` (even coverage of large and small parts alike).
+                centres: np.ndarray | None = None, radius: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) points of the merged scene meshes and their (n, 3) outward unit face normals: area-weighted
+    samples, then farthest-point sampling to ``n`` (even coverage of large and small parts alike). The
+    normals let a method tell inside from outside (:mod:`tohgs.geometry.cloud`), as a depth sensor's
+    estimated normals would.
 
     With ``radius`` > 0, only the scene within ``radius`` of any of the (K, 3) ``centres`` is kept (the
     target's initial and goal positions): the same ``n`` points then resolve the neighbourhood that the
@@ -108,19 +110,22 @@ def scene_cloud(meshes: list[trimesh.Trimesh], n: int, rng: np.random.Generator,
     merged = trimesh.util.concatenate(meshes)
     want = oversample * n
     if radius <= 0 or centres is None:
-        dense, _ = sample_surface(merged, want, rng)
+        dense, dense_n = sample_surface(merged, want, rng)
     else:
         c = np.atleast_2d(np.asarray(centres, dtype=np.float64))
         kept: list[np.ndarray] = []
+        kept_n: list[np.ndarray] = []
         total = 0
         for _ in range(20):
-            pts, _ = sample_surface(merged, want, rng)
-            near = pts[nearest_distance(pts, c) <= radius]
-            kept.append(near)
-            total += len(near)
+            pts, nrm = sample_surface(merged, want, rng)
+            near = nearest_distance(pts, c) <= radius
+            kept.append(pts[near])
+            kept_n.append(nrm[near])
+            total += int(near.sum())
             if total >= want:
                 break
-        dense = np.concatenate(kept)[:want]
+        dense, dense_n = np.concatenate(kept)[:want], np.concatenate(kept_n)[:want]
         if len(dense) < n:
             raise ValueError(f"only {len(dense)} scene samples within {radius} m of the target; need {n}")
-    return dense[farthest_point_sampling(dense, n, start=int(rng.integers(len(dense))))]
+    pick = farthest_point_sampling(dense, n, start=int(rng.integers(len(dense))))
+    return dense[pick], dense_n[pick]

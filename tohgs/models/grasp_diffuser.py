@@ -61,9 +61,10 @@ from torch import nn
 
 from tohgs.data.batch import Batch
 from tohgs.geometry.grasp import GRASP_DIM
+from tohgs.geometry.hand_object import contact_values, inside_hand, vertex_normals
 from tohgs.hand.model import HandModel
 from tohgs.hand.rotations import axis_angle_to_matrix, matrix_to_axis_angle
-from tohgs.models.component import Component
+from tohgs.models.component import Component, seen_grasps
 from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, TimeMLP, sample
 from tohgs.models.pointnet2 import PointNet, PointNet2, PointNet2Config
 
@@ -438,30 +439,6 @@ class GraspDiffuser(Component):
         return out
 
 
-def vertex_normals(verts: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
-    """(B, V, 3) unit vertex normals (area-weighted face normals) of meshes (B, V, 3) with faces (F, 3)."""
-    tri = verts[:, faces]  # (B, F, 3, 3)
-    fn = torch.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0], dim=-1)
-    vn = torch.zeros_like(verts)
-    for k in range(3):
-        vn = vn.index_add(1, faces[:, k], fn)
-    return vn / vn.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-
-
-def contact_values(points: torch.Tensor, hand_verts: torch.Tensor, alpha: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """Normalised contact map (B, N) of points (B, N, 3) to hands (B, V, 3) and the nearest vertex (B, N).
-
-    The nearest vertex is found without gradient and the distance recomputed to it alone: the same values
-    and gradients as the minimum over all distances (whose gradient reaches only the nearest vertex), at a
-    fraction of the cost (the backward pass of the full B x N x V distance matrix was two thirds of a
-    training step)."""
-    with torch.no_grad():
-        idx = torch.cdist(points, hand_verts).argmin(-1)
-    near = torch.gather(hand_verts, 1, idx[..., None].expand(-1, -1, 3))
-    dmin = ((points - near) ** 2).sum(-1).add(1e-12).sqrt()
-    return 1.0 - 2.0 * (torch.sigmoid(alpha * dmin) - 0.5), idx
-
-
 def grasp_losses(model: GraspDiffuser, hand: HandModel, x0_hat: torch.Tensor, x0: torch.Tensor, cond: GraspCondition,
                  contact: torch.Tensor, alpha_contact: float) -> dict[str, torch.Tensor]:
     """The four loss terms per sample (unweighted, unclamped; each (B,)) of predicted normalised vectors
@@ -475,11 +452,7 @@ def grasp_losses(model: GraspDiffuser, hand: HandModel, x0_hat: torch.Tensor, x0
         true_v = hand(model.in_frame_grasp(x0)).vertices
     l_recon = ((pred_v - true_v) ** 2).sum((-1, -2))
     c_pred, idx = contact_values(points, pred_v, alpha_contact)
-    nv = vertex_normals(pred_v, hand.closed_faces)
-    near = torch.gather(pred_v, 1, idx[..., None].expand(-1, -1, 3))
-    near_n = torch.gather(nv, 1, idx[..., None].expand(-1, -1, 3))
-    offset = points - near
-    inside = ((offset * near_n).sum(-1) < 0).float()
+    inside, offset = inside_hand(points, pred_v, vertex_normals(pred_v, hand.closed_faces), idx)
     l_pen = 100.0 * scale * (inside * (offset**2).sum(-1) * (1 + 3 * (1 - contact))).sum(-1)
     l_cons = scale * ((c_pred - contact) ** 2 * (1 + 5 * contact)).sum(-1)
     return {"diff": l_diff, "recon": l_recon, "pen": l_pen, "cons": l_cons}
@@ -491,23 +464,6 @@ def weighted_terms(terms: dict[str, torch.Tensor], weights: tuple[float, float, 
     w_diff, w_recon, w_pen, w_cons = weights
     return {"diff": w_diff * terms["diff"].mean(), "recon": w_recon * terms["recon"].clamp(max=1.0).mean(),
             "pen": w_pen * terms["pen"].clamp(max=1.0).mean(), "cons": w_cons * terms["cons"].mean()}
-
-
-def seen_grasps(model: GraspDiffuser, data, device: torch.device, min_samples: int = 4096, max_draws: int = 8
-                ) -> torch.Tensor:
-    """(G', D) the training grasps as the network sees them: augmented as in training (draws 0, 1, ...
-    of every item of the :class:`tohgs.data.maps.MapDataset` ``data``, until ``min_samples`` or
-    ``max_draws``) and in the network's frame. The normaliser is computed on these, not on the stored
-    grasps, whose rotation the augmentation changes."""
-    draws = 1 if data.rotation == "none" else min(max_draws, max(1, -(-min_samples // len(data))))
-    out = []
-    with torch.no_grad():
-        for draw in range(draws):
-            items = [data.item(i, draw) for i in range(len(data))]
-            for k in range(0, len(items), 256):
-                chunk = Batch.collate(items[k:k + 256], device)
-                out.append(model.in_frame(chunk.grasp, chunk.points, chunk.contact))
-    return torch.cat(out)
 
 
 COMPONENT = GraspDiffuser

@@ -1,0 +1,77 @@
+"""Differentiable hand-object geometry in torch: the hand's vertex normals, the contact map a hand makes
+on an object cloud, and the object points inside a hand. Shared by the losses of GraspDiffuser and
+GraspCVAE and by GraspTTA's test-time adaptation.
+
+Shapes: hands (B, V, 3) vertices with (F, 3) closed faces, object clouds (B, N, 3); metres.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+
+def vertex_normals(verts: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
+    """(B, V, 3) unit vertex normals (area-weighted face normals) of meshes (B, V, 3) with faces (F, 3)."""
+    tri = verts[:, faces]  # (B, F, 3, 3)
+    fn = torch.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0], dim=-1)
+    vn = torch.zeros_like(verts)
+    for k in range(3):
+        vn = vn.index_add(1, faces[:, k], fn)
+    return vn / vn.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+
+
+def nearest_index(points: torch.Tensor, cloud: torch.Tensor) -> torch.Tensor:
+    """(B, N) the index of the nearest of (B, M, 3) ``cloud`` points to each of (B, N, 3) ``points`` (no
+    gradient). On the CPU a k-d tree per sample (scipy) when the cloud has more than 256 points; else, and
+    on other devices, the full distance matrix. A B x N x M matrix is memory-bound on a CPU: for 16 hands
+    of 1609 vertices and 512 points, 115-170 ms against 8-15 ms for the trees."""
+    with torch.no_grad():
+        if points.device.type != "cpu" or cloud.shape[1] <= 256:  # a small cloud: the matrix is cheap
+            return torch.cdist(points, cloud).argmin(-1)
+        from scipy.spatial import cKDTree
+
+        p, c = points.detach().numpy(), cloud.detach().numpy()
+        out = np.stack([cKDTree(c[b]).query(p[b], k=1)[1] for b in range(len(p))]) if len(p) else np.zeros((0, p.shape[1]))
+        return torch.as_tensor(out, dtype=torch.long)
+
+
+def nearest_vertex(points: torch.Tensor, hand_verts: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """For (B, N, 3) points: the distance to the nearest of (B, V, 3) hand vertices (B, N), m, and its
+    index (B, N).
+
+    The nearest vertex is found without gradient (:func:`nearest_index`) and the distance recomputed to it
+    alone: the same values and gradients as the minimum over all distances (whose gradient reaches only the
+    nearest vertex), at a fraction of the cost (the backward pass of the full B x N x V distance matrix was
+    two thirds of a training step)."""
+    idx = nearest_index(points, hand_verts)
+    near = torch.gather(hand_verts, 1, idx[..., None].expand(-1, -1, 3))
+    return ((points - near) ** 2).sum(-1).add(1e-12).sqrt(), idx
+
+
+def contact_values(points: torch.Tensor, hand_verts: torch.Tensor, alpha: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """The normalised contact map (B, N) ``1 - 2 (sigmoid(alpha d) - 0.5)`` of points (B, N, 3) to hands
+    (B, V, 3) (d the distance to the nearest vertex, m) and that vertex's index (B, N)."""
+    dmin, idx = nearest_vertex(points, hand_verts)
+    return 1.0 - 2.0 * (torch.sigmoid(alpha * dmin) - 0.5), idx
+
+
+def inside_hand(points: torch.Tensor, hand_verts: torch.Tensor, hand_normals: torch.Tensor,
+                idx: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """Which object points lie inside the hands: behind their nearest hand vertex's outward normal.
+
+    Args:
+        points: (B, N, 3) object points, m.
+        hand_verts, hand_normals: (B, V, 3) the hands' vertices and unit outward vertex normals.
+        idx: (B, N) the nearest vertex per point, if known (:func:`nearest_vertex`).
+
+    Returns:
+        ``inside`` (B, N) float, 1 inside; ``offset`` (B, N, 3) from the nearest vertex to the point (its
+        squared norm, differentiable in the hand, is the usual penetration energy).
+    """
+    if idx is None:
+        _, idx = nearest_vertex(points, hand_verts)
+    near = torch.gather(hand_verts, 1, idx[..., None].expand(-1, -1, 3))
+    near_n = torch.gather(hand_normals, 1, idx[..., None].expand(-1, -1, 3))
+    offset = points - near
+    return ((offset * near_n).sum(-1) < 0).float(), offset
