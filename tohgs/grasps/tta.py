@@ -1,0 +1,101 @@
+"""GraspTTA's test-time adaptation (Jiang et al. ICCV 2021): the grasp parameters (not the networks) are
+optimised so that the hand touches the object where a good grasp would, without entering it.
+
+The energy of S hands on one object cloud (each hand's own sum, so that the S optimisations are
+independent; the official code generated one grasp at a time):
+
+``E = w_contact E_contact + w_consistency E_consistency + w_penetration E_penetration``
+
+- ``E_contact`` (hand-centric contact): for the object points within ``contact_radius`` of the hand, the
+  mean squared distance to the nearest of the hand's contact-candidate vertices (palm side, fingertips:
+  :attr:`tohgs.hand.assets.HandAssets.contact_ids`, the counterpart of the official code's fingertip and
+  palm vertex lists), times 7500 (the official 2.5 x 3000);
+- ``E_consistency``: the squared difference, summed over the points, of the contact map the hand makes
+  (alpha of the map shards) and ContactNet's map for the current hand (held fixed per step), times 1e-4;
+- ``E_penetration``: object points inside the hand (behind their nearest hand vertex's normal), the sum of
+  their squared distances to it, times 120.
+
+The point sums are scaled to the official 3000 points. Optimiser: SGD with momentum (the official lr
+6.25e-6, momentum 0.8, 300 steps; all settings, the laptop default 100 steps). After every step the finger numbers are clamped to the
+hand's joint limits (the official MANO PCA space needed no clamp; our 45 axis-angle numbers do).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from tohgs.geometry.hand_object import contact_values, inside_hand, nearest_vertex, vertex_normals
+from tohgs.hand.model import HandModel
+
+OFFICIAL_POINTS = 3000  # the official code's object points: the point sums are scaled to this many
+
+
+@dataclass(frozen=True)
+class TTASettings:
+    """The adaptation's optimiser and weights (module docstring); ``steps`` 0 returns the input."""
+
+    steps: int = 100  # the paper's 300 (config/paper.yaml)
+    lr: float = 6.25e-6
+    momentum: float = 0.8
+    w_contact: float = 1.0
+    w_consistency: float = 1.0
+    w_penetration: float = 7.0
+    contact_radius: float = 0.02
+
+
+def clamp_to_limits(grasp: torch.Tensor, limits: torch.Tensor) -> torch.Tensor:
+    """(B, 51) grasps with the 45 finger numbers clamped to (15, 3, 2) ``[min, max]`` limits, radians."""
+    lim = limits.reshape(45, 2).to(grasp)
+    return torch.cat([grasp[:, :6], torch.maximum(torch.minimum(grasp[:, 6:], lim[:, 1]), lim[:, 0])], -1)
+
+
+def tta_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_net, alpha: float,
+               settings: TTASettings, object_features=None) -> dict[str, torch.Tensor]:
+    """The three weighted terms and their sum ``"energy"``, each (B,), of (B, 51) grasps on (B, N, 3)
+    object points; ``contact_net`` is a :class:`tohgs.models.contact_net.ContactNet` (its
+    ``object_features`` of the points may be given: they do not change while the hands move)."""
+    scale = OFFICIAL_POINTS / points.shape[1]
+    verts = hand(grasp).vertices
+    c_hand, idx = contact_values(points, verts, alpha)
+    with torch.no_grad():
+        c_target = contact_net.predict_map(points, verts, c_hand.detach(), object_features)
+    consistency = 1e-4 * scale * ((c_hand - c_target) ** 2).sum(-1)
+    inside, offset = inside_hand(points, verts, vertex_normals(verts, hand.closed_faces), idx)
+    penetration = 120.0 * scale * (inside * (offset**2).sum(-1)).sum(-1)
+    d_candidates, _ = nearest_vertex(points, verts[:, hand.contact_ids])
+    with torch.no_grad():  # the map is 1 - 2 (sigmoid(alpha d) - 0.5): d < r where the map exceeds its value at r
+        close = (c_hand > 1.0 - 2.0 * (torch.sigmoid(torch.tensor(alpha * settings.contact_radius)) - 0.5)).float()
+    contact = 7500.0 * (close * d_candidates**2).sum(-1) / close.sum(-1).clamp_min(1.0)
+    terms = {"contact": settings.w_contact * contact, "consistency": settings.w_consistency * consistency,
+             "penetration": settings.w_penetration * penetration}
+    return {**terms, "energy": terms["contact"] + terms["consistency"] + terms["penetration"]}
+
+
+def adapt(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_net, alpha: float,
+          settings: TTASettings) -> tuple[torch.Tensor, dict[str, list[float]]]:
+    """Run the adaptation from (B, 51) grasps on (B, N, 3) object points (network frame, m).
+
+    Returns:
+        The adapted (B, 51) grasps (finger numbers within the joint limits) and the history of the mean
+        energy and its terms (one value per step, before the step; the last after the last step).
+    """
+    g = clamp_to_limits(grasp.detach().clone(), hand.joint_limits).requires_grad_(True)
+    opt = torch.optim.SGD([g], lr=settings.lr, momentum=settings.momentum)
+    history: dict[str, list[float]] = {}
+    with torch.no_grad():
+        features = contact_net.object_features(points)
+    with torch.enable_grad():
+        for step in range(settings.steps + 1):
+            terms = tta_energy(hand, g, points, contact_net, alpha, settings, features)
+            for k, v in terms.items():
+                history.setdefault(k, []).append(float(v.detach().mean()))
+            if step == settings.steps:
+                break
+            opt.zero_grad(set_to_none=True)
+            terms["energy"].sum().backward()
+            opt.step()
+            with torch.no_grad():
+                g.copy_(clamp_to_limits(g, hand.joint_limits))
+    return g.detach(), history
