@@ -61,13 +61,13 @@ def test_grasp_metrics_of_a_clear_and_a_sunk_hand_at_a_moved_pose(cube_assets):
     assert 0.2 < m["init_opp"][0] < 0.8 and m["init_opp"][1] == 0.0
 
 
-def _rows(pv, sd, init_opp, goal_opp, method="ours", task="placing", config=None):
+def _rows(pv, sd, init_opp, goal_opp, method="ours", task="placing", config=None, kept=None):
     n = len(pv)
     config = np.zeros(n, int) if config is None else np.asarray(config)
     return pd.DataFrame({"task": task, "method": method, "object": "pb-x", "config_index": config,
                          "sample": np.arange(n), "pv": pv, "sd": sd, "contact_distance": 0.0,
                          "init_opp": init_opp, "goal_opp": goal_opp, "ds": config * 1.0 + 1.0,
-                         "hand_vertices": 778})[list(COLUMNS)]
+                         "hand_vertices": 778, "kept": True if kept is None else kept})[list(COLUMNS)]
 
 
 def test_summary_numbers_follow_their_definitions():
@@ -83,6 +83,23 @@ def test_summary_numbers_follow_their_definitions():
     assert s["grasps"] == 4 and s["configs"] == 2
     # a looser SD threshold counts grasp 1 too
     assert summarize(f, QualityThresholds(max_sd=0.04))["qr"] == pytest.approx(75.0)
+    assert s["discarded"] == 0
+
+
+def test_discarded_grasps_are_counted_and_left_out_and_a_row_with_none_kept_is_zero():
+    f = _rows(pv=[0.0, np.nan, 5e-6, np.nan], sd=[0.01, np.nan, 0.01, np.nan], init_opp=[0.0, np.nan, 0.2, np.nan],
+              goal_opp=[0.0, np.nan, 0.0, np.nan], config=[0, 0, 1, 1], kept=[True, False, True, False])
+    s = summarize(f, QualityThresholds())
+    assert s["grasps"] == 2 and s["discarded"] == 2 and s["qr"] == pytest.approx(50.0)
+    assert s["init_opp"] == pytest.approx(10.0) and s["ts"] == pytest.approx(0.5 * 0.9)
+    none = summarize(f.assign(kept=False), QualityThresholds())
+    assert none["discarded"] == 4 and none["grasps"] == 0
+    assert all(none[k] == 0.0 for k in ("qr", "ts", "pv_avg", "init_opp", "goal_opp", "ds"))
+    assert qr_grid(f.assign(kept=False), ["placing"], ["ours"], {}, [3e-6], [0.02]).qr.isna().all()
+    t = metric_table(f, ["placing"], ["ours"], {}, ["qr", "ts", "discarded"], QualityThresholds(), ["Ours (OC)"])
+    assert list(t.method) == ["ours", "Ours (OC)"] and np.isnan(t.qr.iloc[1]) and t.discarded.iloc[0] == 2
+    md = markdown(t, notes={"Ours (OC)": "needs the object-centric contact predictor"})
+    assert "| placing | Ours (OC)* | – | – | – |" in md and "* Ours (OC): needs the object-centric" in md
 
 
 LABELS = {"dataset": "Dataset", "ours": "Ours"}

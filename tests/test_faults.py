@@ -94,7 +94,7 @@ def _stores(built, tmp: Path) -> dict[str, tuple[Path, str, callable]]:  # noqa:
     shutil.copytree(src / "shard-0.zarr", tmp / "shard.zarr")
     arrays = {"object_id": np.zeros(2, np.int32), "config_index": np.arange(2, dtype=np.int32),
               "contact": np.full((2, 2, 8), 0.5, np.float32), "grasp_init": np.ones((2, 2, 51), np.float32),
-              "grasp_goal": np.ones((2, 2, 51), np.float32)}
+              "grasp_goal": np.ones((2, 2, 51), np.float32), "kept": np.ones((2, 2), bool)}
     write_predictions(arrays, {"task": "placing", "method": "ours", "objects": ["brick-cube"]}, tmp / "pred.zarr")
     return {"scenes": (tmp / "scenes.zarr", "target_init_pose", read_scenes),
             "prior grasps": (tmp / "prior.zarr", "pose", lambda p: read_prior_grasps(p, filtered=True)),

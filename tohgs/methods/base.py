@@ -16,8 +16,10 @@ from tohgs.data.maps import MapShard
 class PredictSettings:
     """``samples`` S per configuration (the paper's 16); sampler ``ddpm`` (all T steps) or ``ddim`` with
     ``steps`` steps; ``seed``; ``device``; GraspDiffuser's classifier-free ``guidance`` scale;
-    ``contact_smoothing``, the neighbours over which ContactDiffuser's maps are averaged (0: none). A
-    method's ``settings`` block overlays the config's ``prediction`` block."""
+    ``contact_smoothing``, the neighbours over which ContactDiffuser's maps are averaged (0: none); ``tta``
+    and ``filter``, GraspTTA's adaptation and F-GraspTTA's filter (:mod:`tohgs.methods.grasp_tta`,
+    :mod:`tohgs.methods.filtered`). A
+    method's ``settings`` block overlays the config's ``prediction`` block (the two sub-blocks key by key)."""
 
     samples: int = 16
     sampler: str = "ddim"
@@ -27,28 +29,38 @@ class PredictSettings:
     device: str = "auto"
     guidance: float = 1.0  # GraspDiffuser's classifier-free guidance scale (1: none; needs cond_dropout)
     contact_smoothing: int = 0  # k of smooth_contact for a contact component's maps (0 or 1: none)
+    tta: dict = field(default_factory=dict)  # tohgs.grasps.tta.TTASettings
+    filter: dict = field(default_factory=dict)  # tohgs.methods.filtered.FilterSettings
 
 
 @dataclass
 class Prediction:
     """One configuration's S predictions: ``contact`` (S, N) the maps the grasps were made from, in [0, 1];
-    ``grasp`` (S, 51) grasps at the initial pose in the network frame; ``seconds`` per stage."""
+    ``grasp`` (S, 51) grasps at the initial pose in the network frame; ``seconds`` per stage; ``kept``
+    (S,) False for a grasp the method discarded (None: all kept); ``info``, numbers the method records
+    of the configuration (the store's ``diagnostics``)."""
 
     contact: np.ndarray
     grasp: np.ndarray
     seconds: dict[str, float] = field(default_factory=dict)
+    kept: np.ndarray | None = None
+    info: dict[str, float] = field(default_factory=dict)
 
 
 class Method:
     """A method kind: built once per prediction job from its config block, its trained components (by
-    config name, eval mode, on ``device``) and the settings; then asked for each test configuration.
+    config name, eval mode, on ``device``), the settings, the hand model (on ``device``; the methods that
+    pose hands use it) and, for a method of another method (``filtered``), that method's prediction store
+    (arrays, attrs); then asked for each test configuration.
 
     Subclasses set ``needs`` (the method keys that must name components) and implement :meth:`predict`.
     """
 
     def __init__(self, name: str, cfg: dict[str, Any], models: dict[str, torch.nn.Module], settings: PredictSettings,
-                 device: torch.device):
+                 device: torch.device, hand: torch.nn.Module | None = None,
+                 base: tuple[dict[str, np.ndarray], dict[str, Any]] | None = None):
         self.name, self.cfg, self.models, self.settings, self.device = name, cfg, models, settings, device
+        self.hand, self.base = hand, base
 
     def model(self, key: str) -> torch.nn.Module:
         """The component the method key ``key`` names (a clear error when the job was not given it)."""

@@ -20,7 +20,7 @@ import torch
 from tohgs.config import settings_from
 from tohgs.data.batch import Batch
 from tohgs.data.maps import MapDataset
-from tohgs.data.predictions import write_predictions
+from tohgs.data.predictions import read_predictions, write_predictions
 from tohgs.geometry.grasp import GRASP_DIM, transform_grasp
 from tohgs.methods import method_kind_exists, method_kinds
 from tohgs.methods.base import Method, PredictSettings
@@ -38,7 +38,8 @@ def method_class(kind: str) -> type[Method]:
 
 
 def predict(task: str, name: str, method: dict[str, Any], test_shards: list[str | Path],
-            checkpoints: dict[str, str | Path], settings: dict[str, Any], out: str | Path) -> dict[str, np.ndarray]:
+            checkpoints: dict[str, str | Path], settings: dict[str, Any], out: str | Path,
+            hand: str | Path | None = None, base: str | Path | None = None) -> dict[str, np.ndarray]:
     """Predict S grasps per test configuration of ``task`` with the method ``name`` and write the store ``out``.
 
     Args:
@@ -47,6 +48,8 @@ def predict(task: str, name: str, method: dict[str, Any], test_shards: list[str 
         test_shards: the task's test map shards.
         checkpoints: the trained components the method names, by config name.
         settings: a mapping of :class:`tohgs.methods.base.PredictSettings`.
+        hand: the hand file (``results/hand/hand.npz``), for the methods that pose hands.
+        base: the prediction store of the method this one is of (kind ``filtered``: its key ``of``).
 
     Returns:
         The arrays written (:mod:`tohgs.data.predictions`).
@@ -63,11 +66,18 @@ def predict(task: str, name: str, method: dict[str, Any], test_shards: list[str 
         models[comp], ckpt = load_component(path, device)
         curve = ckpt.get("loss_curve") or []
         meta[comp] = {"kind": ckpt["kind"], "final_loss": curve[-1]["loss"] if curve else None}
-    runner = method_class(method["kind"])(name, method, models, s, device)
+    hand_model = None
+    if hand is not None:
+        from tohgs.hand import HandAssets, HandModel
+
+        hand_model = HandModel(HandAssets.load(hand)).to(device)
+    runner = method_class(method["kind"])(name, method, models, s, device, hand_model,
+                                          None if base is None else read_predictions(base))
     data = MapDataset(test_shards, per="config")
     gen = torch.Generator().manual_seed(s.seed)
     rng = np.random.default_rng(s.seed)
-    rows: dict[str, list] = {k: [] for k in ("object_id", "config_index", "contact", "grasp_init", "grasp_goal")}
+    rows: dict[str, list] = {k: [] for k in ("object_id", "config_index", "contact", "grasp_init", "grasp_goal", "kept")}
+    diagnostics: dict[str, list[float]] = {}
     seconds: dict[str, float] = {}
     skipped = 0
     from tqdm import tqdm
@@ -90,19 +100,30 @@ def predict(task: str, name: str, method: dict[str, Any], test_shards: list[str 
         rows["grasp_init"].append(world.astype(np.float32))
         rows["grasp_goal"].append(transform_grasp(world, shard.goal_transform[c],
                                                   np.asarray(shard.attrs["hand_wrist"])).astype(np.float32))
+        rows["kept"].append(np.ones(s.samples, bool) if pred.kept is None else np.asarray(pred.kept, bool))
+        for k in set(diagnostics) | set(pred.info):  # a key a configuration lacks is NaN there
+            diagnostics.setdefault(k, [float("nan")] * (len(rows["kept"]) - 1)).append(float(pred.info.get(k, np.nan)))
     n = len(rows["object_id"])
     if n == 0:  # e.g. ground-truth maps for test configurations that kept no task grasp
         log.warning("%s/%s: no test configuration could be predicted (%d skipped)", task, name, skipped)
     n_points = data.shards[0].points.shape[1] if data.shards else 0
-    empty = {"contact": (0, s.samples, n_points), "grasp_init": (0, s.samples, GRASP_DIM), "grasp_goal": (0, s.samples, GRASP_DIM)}
+    empty = {"contact": (0, s.samples, n_points), "grasp_init": (0, s.samples, GRASP_DIM),
+             "grasp_goal": (0, s.samples, GRASP_DIM), "kept": (0, s.samples)}
     arrays = {"object_id": np.asarray(rows["object_id"], np.int32), "config_index": np.asarray(rows["config_index"], np.int32),
               **{k: np.stack(rows[k]) if n else np.zeros(shape, np.float32) for k, shape in empty.items()}}
-    per = max(1, n * s.samples)
+    per = max(1, sum(len(k) for k in rows["kept"]))
     timing = {f"seconds_per_{k}": v / per for k, v in seconds.items()}
     vocab = data.shards[0].attrs["objects"] if data.shards else []
+    discarded = int((~arrays["kept"]).sum())
     write_predictions(arrays, {"task": task, "method": name, "method_config": method, "objects": vocab,
-                               "components": meta, "config": asdict(s), "timing": timing, "skipped_configs": skipped},
+                               "components": meta, "config": asdict(s), "timing": timing, "skipped_configs": skipped,
+                               "discarded": discarded,
+                               "diagnostics": {k: [None if np.isnan(x) else x for x in v] for k, v in diagnostics.items()}},
                       out)
-    log.info("%s/%s: %d configurations x %d grasps (%d skipped); %s (%s, %d steps)", task, name, n, s.samples, skipped,
-             ", ".join(f"{k} {v:.3f} s" for k, v in timing.items()) or "no timing", s.sampler, s.steps)
+    log.info("%s/%s: %d configurations x %d grasps (%d skipped, %d grasps discarded); %s (%s, %d steps)", task, name, n,
+             s.samples, skipped, discarded, ", ".join(f"{k} {v:.3f} s" for k, v in timing.items()) or "no timing",
+             s.sampler, s.steps)
+    for k, v in diagnostics.items():
+        log.info("%s/%s: %s mean %.4g, median %.4g over %d configurations", task, name, k, np.nanmean(v),
+                 np.nanmedian(v), len(v))
     return arrays

@@ -11,7 +11,10 @@ For every predicted grasp of a test configuration (a prediction store, :mod:`toh
   to the goal pose;
 - ``ds``: the configuration's diversity, repeated on each of its rows: the mean over all pairs of its
   grasps of the summed per-vertex L2 distance between the two hands (at the initial pose), m. It scales
-  with the hand's vertex count, which each row records (``hand_vertices``; MANO has 778).
+  with the hand's vertex count, which each row records (``hand_vertices``; MANO has 778);
+- ``kept``: False for a grasp the method discarded (the prediction store's ``kept``, F-GraspTTA's
+  filter): its row is kept, so that the tables can count it, with NaN metrics (it is not simulated), and
+  the configuration's DS is of its kept grasps.
 
 The table-level numbers (CR, QR, TS and the QR grid) are computed from these rows by
 :mod:`tohgs.metrics.tables`, so a QR threshold change re-reads the rows and reruns nothing else.
@@ -38,7 +41,7 @@ from tohgs.metrics.quality import DisplacementSimulator, SDSettings, hand_qualit
 log = logging.getLogger(__name__)
 
 COLUMNS = ("task", "method", "object", "config_index", "sample", "pv", "sd", "contact_distance", "init_opp",
-           "goal_opp", "ds", "hand_vertices")
+           "goal_opp", "ds", "hand_vertices", "kept")
 
 
 def diversity(vertices: np.ndarray) -> float:
@@ -123,6 +126,7 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
     supports = read_supports(supports_json)
     objects_dir = Path(objects_dir)
     faces = np.asarray(hand.closed_faces)
+    n_vertices = len(hand.rest_vertices)
     assets: dict = {}
     meshes: dict = {}
     rows = []
@@ -145,17 +149,23 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
             if name not in sims:
                 sims[name] = DisplacementSimulator(obj.collision, obj.vertex_mean, s_sd)
             collider = SceneCollider(scene_meshes(sc, c, objects_dir, supports, meshes))
-            v_init = hand.vertices(arrays["grasp_init"][i])
-            v_goal = hand.vertices(arrays["grasp_goal"][i])
-            m = grasp_metrics(v_init, v_goal, faces, hand.palm_ids, obj, sc.target_init_pose[c], collider,
-                              voxel_pitch, sims[name])
-            ds = diversity(v_init)
-            for k in range(len(v_init)):
+            kept = np.asarray(arrays["kept"][i], bool)
+            m, ds = {}, float("nan")  # DS of a configuration that a filter left fewer than two grasps: none
+            if kept.any():
+                v_init = hand.vertices(arrays["grasp_init"][i][kept])
+                v_goal = hand.vertices(arrays["grasp_goal"][i][kept])
+                m = grasp_metrics(v_init, v_goal, faces, hand.palm_ids, obj, sc.target_init_pose[c], collider,
+                                  voxel_pitch, sims[name])
+                if kept.all() or kept.sum() >= 2:
+                    ds = diversity(v_init)
+            at = np.cumsum(kept) - 1  # the row of each kept grasp among the metrics
+            for k in range(len(kept)):
+                values = ({key: float(val[at[k]]) for key, val in m.items()} if kept[k] else
+                          dict.fromkeys(("pv", "sd", "contact_distance", "init_opp", "goal_opp"), float("nan")))
                 rows.append({"task": attrs["task"], "method": attrs["method"], "object": name, "config_index": c,
-                             "sample": k, **{key: float(val[k]) for key, val in m.items()}, "ds": ds,
-                             "hand_vertices": v_init.shape[1]})
+                             "sample": k, **values, "ds": ds, "hand_vertices": n_vertices, "kept": bool(kept[k])})
     finally:
         for sim in sims.values():
             sim.close()
     frame = pd.DataFrame(rows, columns=list(COLUMNS))
-    return frame.astype({"config_index": np.int32, "sample": np.int32, "hand_vertices": np.int32})
+    return frame.astype({"config_index": np.int32, "sample": np.int32, "hand_vertices": np.int32, "kept": bool})

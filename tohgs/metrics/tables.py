@@ -18,7 +18,12 @@ init_opp       hand vertices inside the initial scene, %
 goal_opp       hand vertices inside the goal scene, %
 ts             task success ``QR x (1 - InitOPP) x (1 - GoalOPP)`` from the averages
 grasps         grasps evaluated; ``configs``: configurations they came from
+discarded      grasps the method discarded (a filter's, F-GraspTTA's): not evaluated, not in the others
 =============  =================================================================================
+
+Every metric is of the kept grasps. A method that kept none has every metric 0 with its count of
+discarded grasps, as the paper's F-GraspTTA Stacking row. A table may list ``pending`` rows, methods that
+cannot be built yet, with the reason: they appear with empty cells (NaN) and the reason in the markdown.
 """
 
 from __future__ import annotations
@@ -30,10 +35,11 @@ import numpy as np
 import pandas as pd
 
 METRIC_COLUMNS = ("pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "init_opp", "goal_opp", "ts", "grasps",
-                  "configs")
+                  "configs", "discarded")
 _HEADERS = {"task": "Task", "method": "Method", "pv_avg": "PV avg (cm³)", "pv_std": "PV std", "sd_avg": "SD avg (cm)",
             "sd_std": "SD std", "cr": "CR %", "qr": "QR %", "ds": "DS", "init_opp": "Init OPP %",
-            "goal_opp": "Goal OPP %", "ts": "TS", "grasps": "grasps", "configs": "configs"}
+            "goal_opp": "Goal OPP %", "ts": "TS", "grasps": "grasps", "configs": "configs",
+            "discarded": "discarded"}
 
 
 @dataclass(frozen=True)
@@ -45,18 +51,26 @@ class QualityThresholds:
 
 
 def quality_ratio(frame: pd.DataFrame, t: QualityThresholds) -> float:
-    """QR in % (NaN without rows)."""
+    """QR in % of the kept grasps (NaN without rows)."""
+    if "kept" in frame.columns:
+        frame = frame[frame.kept.astype(bool)]
     if len(frame) == 0:
         return float("nan")
     return float(((frame.pv < t.max_pv) & (frame.sd < t.max_sd)).mean() * 100)
 
 
 def summarize(frame: pd.DataFrame, t: QualityThresholds) -> dict[str, float]:
-    """Every metric column of one task and method's rows (NaN where there are none)."""
+    """Every metric column of one task and method's rows: of the kept grasps; NaN where there are no rows,
+    0 where every grasp was discarded (module docstring)."""
+    if "kept" in frame.columns:
+        discarded = int((~frame.kept.astype(bool)).sum())
+        frame = frame[frame.kept.astype(bool)]
+    else:
+        discarded = 0
     n = len(frame)
     if n == 0:
-        out = {k: float("nan") for k in METRIC_COLUMNS}
-        out.update(grasps=0, configs=0)
+        out = {k: float("nan") if discarded == 0 else 0.0 for k in METRIC_COLUMNS}
+        out.update(grasps=0, configs=0, discarded=discarded)
         return out
     qr = quality_ratio(frame, t)
     init_opp, goal_opp = float(frame.init_opp.mean()), float(frame.goal_opp.mean())
@@ -65,7 +79,7 @@ def summarize(frame: pd.DataFrame, t: QualityThresholds) -> dict[str, float]:
             "sd_avg": float(frame.sd.mean() * 100), "sd_std": float(frame.sd.std(ddof=0) * 100),
             "cr": float((frame.pv > 0).mean() * 100), "qr": qr, "ds": float(ds.mean()),
             "init_opp": init_opp * 100, "goal_opp": goal_opp * 100,
-            "ts": qr / 100 * (1 - init_opp) * (1 - goal_opp), "grasps": n, "configs": len(ds)}
+            "ts": qr / 100 * (1 - init_opp) * (1 - goal_opp), "grasps": n, "configs": len(ds), "discarded": discarded}
 
 
 def read_metrics(paths: list[str | Path]) -> pd.DataFrame:
@@ -83,8 +97,9 @@ def read_metrics(paths: list[str | Path]) -> pd.DataFrame:
 
 
 def metric_table(rows: pd.DataFrame, tasks: list[str], methods: list[str], labels: dict[str, str],
-                 columns: list[str], t: QualityThresholds) -> pd.DataFrame:
-    """One row per task and method, in the given orders: ``task``, ``method`` (its label) and ``columns``."""
+                 columns: list[str], t: QualityThresholds, pending: list[str] = ()) -> pd.DataFrame:
+    """One row per task and method, in the given orders: ``task``, ``method`` (its label) and ``columns``;
+    then per task a row of NaN for each label of ``pending`` (methods not available yet)."""
     unknown = [c for c in columns if c not in METRIC_COLUMNS]
     if unknown:
         raise ValueError(f"unknown table columns {unknown} (known: {', '.join(METRIC_COLUMNS)})")
@@ -94,6 +109,7 @@ def metric_table(rows: pd.DataFrame, tasks: list[str], methods: list[str], label
             sel = rows[(rows.task == task) & (rows.method == m)]
             summary = summarize(sel, t)
             out.append({"task": task, "method": labels.get(m, m), **{c: summary[c] for c in columns}})
+        out += [{"task": task, "method": label, **dict.fromkeys(columns, float("nan"))} for label in pending]
     return pd.DataFrame(out, columns=["task", "method", *columns])
 
 
@@ -111,17 +127,23 @@ def qr_grid(rows: pd.DataFrame, tasks: list[str], methods: list[str], labels: di
     return pd.DataFrame(out, columns=["task", "method", "max_pv_cm3", "max_sd_cm", "qr"])
 
 
-def markdown(table: pd.DataFrame, digits: int = 3) -> str:
-    """A GitHub markdown table of :func:`metric_table`'s frame (NaN as an en dash)."""
+def markdown(table: pd.DataFrame, digits: int = 3, notes: dict[str, str] | None = None) -> str:
+    """A GitHub markdown table of :func:`metric_table`'s frame (NaN as an en dash); ``notes`` (a method
+    label -> a sentence) are marked on the label and listed below the table."""
+    notes = notes or {}
+    marks = {label: "*" * (k + 1) for k, label in enumerate(notes)}
     cols = list(table.columns)
     lines = ["| " + " | ".join(_HEADERS.get(c, c) for c in cols) + " |", "|" + "---|" * len(cols)]
     for _, r in table.iterrows():
         cells = []
         for c in cols:
             v = r[c]
-            if isinstance(v, (float, np.floating)):
+            if c in ("grasps", "configs", "discarded"):
+                cells.append(str(int(v)) if np.isfinite(v) else "–")
+            elif isinstance(v, (float, np.floating)):
                 cells.append("–" if not np.isfinite(v) else f"{v:.{digits}f}" if c in ("ts", "ds") else f"{v:.2f}")
             else:
-                cells.append(str(v))
+                cells.append(str(v) + (marks.get(v, "") if c == "method" else ""))
         lines.append("| " + " | ".join(cells) + " |")
+    lines += [""] + [f"{marks[label]} {label}: {why}" for label, why in notes.items()] if notes else []
     return "\n".join(lines) + "\n"
