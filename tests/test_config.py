@@ -54,7 +54,7 @@ def test_defaults_are_filled_in_place():
         ({"objects": {"sources": {"dir": {"path": "no/such/folder"}}}}, "objects.sources.dir.path", "does not exist"),
         ({"objects": {"sources": {"pybullet_data": {"random_urdfs": 0, "named": 0}, "bricks": {"count": 0}}}},
          "objects.sources", "empty"),
-        ({"components": {"cvae": {"kind": "grasp_cvae"}}}, "components.cvae.kind", "unknown component kind"),
+        ({"components": {"flow": {"kind": "flow_matcher"}}}, "components.flow.kind", "unknown component kind"),
         ({"components": {"My Net": {"kind": "grasp_diffuser"}}}, "components", "does not match"),
         ({"components": {"contact_diffuser": {"network": {"d_modle": 8}}}}, "components.contact_diffuser.network.d_modle",
          "unknown key"),
@@ -70,6 +70,18 @@ def test_defaults_are_filled_in_place():
         ({"tables": {"table1": {"rows": ["dataset", "oracle"]}}}, "tables.table1.rows", "is not a method"),
         ({"tables": {"t2": {"rows": ["ours"], "columns": ["tss"]}}}, "tables.t2.columns.0", "is not one of"),
         ({"figures": {"method": "oracle"}}, "figures.method", "is not a method"),
+        ({"figures": {"methods": ["ours", "oracle"]}}, "figures.methods", "is not a method"),
+        ({"methods": {"grasptta": {"contact_net": "contact_diffuser"}}}, "methods.grasptta.contact_net",
+         "must be a hand_contact component"),
+        ({"methods": {"grasptta": {"contact": "nothing"}}}, "methods.grasptta.contact", "is not a component"),
+        ({"methods": {"f-grasptta": {"settings": {"filter": {"transform": "ransac"}}}}},
+         "methods.f-grasptta.settings.filter.transform", "is not one of"),
+        ({"methods": {"f-grasptta": {"settings": {"filter": {"max_op": 0.1}}}}}, "methods.f-grasptta.settings.filter.max_op",
+         "unknown key"),
+        ({"tables": {"table2": {"pending": [{"label": "X"}]}}}, "tables.table2.pending.0", "required"),
+        ({"methods": {"f-grasptta": {"of": "f-grasptta"}}}, "methods.f-grasptta.of", "is not another method"),
+        ({"methods": {"a": {"label": "A", "kind": "filtered", "of": "b"}, "b": {"label": "B", "kind": "filtered", "of": "a"}}},
+         "methods.a.of", "a cycle of methods"),
     ],
 )
 def test_invalid_config_names_key_and_problem(default_config, patch, key, problem):
@@ -100,8 +112,10 @@ def test_a_config_adds_methods_and_tables_to_the_built_in_ones_and_fills_their_d
                                                      "settings": {"sampler": "ddpm"}}},
                            "tables": {"samplers": {"rows": ["ours", "ours-ddpm"]}},
                            "components": {"grasp_diffuser": {"kind": "grasp_diffuser", "network": {"d_model": 32}}}})
-    assert set(cfg["methods"]) == {"dataset", "ours", "ours-gt-contact", "ours-ddpm"}
-    assert set(cfg["tables"]) == {"table1", "samplers"} and cfg["tables"]["samplers"]["columns"][-1] == "configs"
+    assert set(cfg["methods"]) == {"dataset", "ours", "ours-gt-contact", "grasptta", "f-grasptta", "m-grasptta-ta",
+                                   "m-grasptta-gt", "ours-ddpm"}
+    assert set(cfg["tables"]) == {"table1", "table2", "table4", "samplers"}
+    assert cfg["tables"]["samplers"]["columns"][-1] == "discarded" and cfg["tables"]["samplers"]["pending"] == []
     gd = cfg["components"]["grasp_diffuser"]
     # a built-in entry overlaid: the keys the config does not give come from the built-in one
     assert gd["network"]["d_model"] == 32 and gd["network"]["n_blocks"] == 3 and gd["training"]["steps"] == 2400
@@ -115,22 +129,32 @@ def test_the_settings_dataclasses_default_to_the_schema():
     from tohgs.methods.base import PredictSettings
     from tohgs.models.contact_diffuser import ContactDiffuserConfig
     from tohgs.models.grasp_diffuser import GraspDiffuserConfig
+    from tohgs.geometry.registration import ICPSettings
+    from tohgs.grasps.tta import TTASettings
+    from tohgs.methods.filtered import FilterSettings
+    from tohgs.models.contact_net import ContactNetConfig
+    from tohgs.models.grasp_cvae import GraspCVAEConfig
     from tohgs.models.train import TrainSettings
 
     cfg = validate_config({})
     schema = load_schema()
     networks = {}
-    for kind in ("contact_diffuser", "grasp_diffuser"):
+    for kind in ("contact_diffuser", "grasp_diffuser", "grasp_cvae", "contact_net"):
         networks[kind] = {}
         from tohgs.config import _fill_defaults
 
         _fill_defaults(networks[kind], schema["$defs"]["networks"][kind])
-    pairs = [(TrainSettings, cfg["training"]), (PredictSettings, cfg["prediction"]),
-             (ContactDiffuserConfig, networks["contact_diffuser"]), (GraspDiffuserConfig, networks["grasp_diffuser"])]
+    pred = cfg["prediction"]
+    pairs = [(TrainSettings, cfg["training"]), (PredictSettings, pred), (TTASettings, pred["tta"]),
+             (FilterSettings, pred["filter"]), (ICPSettings, pred["filter"]["icp"]),
+             (ContactDiffuserConfig, networks["contact_diffuser"]), (GraspDiffuserConfig, networks["grasp_diffuser"]),
+             (GraspCVAEConfig, networks["grasp_cvae"]), (ContactNetConfig, networks["contact_net"])]
     for cls, block in pairs:
         for f in dataclasses.fields(cls):
             value = getattr(cls(), f.name)
             assert f.name in block, f"{cls.__name__}.{f.name} is not in the schema"
+            if isinstance(block[f.name], dict) and value in ({}, None):
+                continue  # a sub-block: its own dataclass is compared above
             expect = block[f.name]
             norm = (lambda v: [norm(x) for x in v] if isinstance(v, (list, tuple)) else v)  # noqa: E731
             assert norm(value) == norm(expect), f"{cls.__name__}.{f.name}: {value!r} != schema {expect!r}"

@@ -190,7 +190,7 @@ def test_smoke_run_outputs(smoke_run):
 
     methods = cfg["tables"]["table1"]["rows"]
     for task in cfg["scenes"]["tasks"]:
-        for model in ("contact_diffuser", "grasp_diffuser"):
+        for model in cfg["components"]:
             ckpt = torch.load(smoke_run / f"results/models/{task}/{model}.pt", weights_only=True)
             assert ckpt["format"] == "tohgs.checkpoint" and ckpt["component"] == model
             assert ckpt["loss_curve"][-1]["step"] == cfg["components"][model]["training"]["steps"]
@@ -204,10 +204,12 @@ def test_smoke_run_outputs(smoke_run):
         for method in methods:
             rows = pd.read_parquet(smoke_run / f"results/metrics/{task}/{method}.parquet")
             assert list(rows.columns) == list(COLUMNS) and (rows.method == method).all()
-            assert ((rows.init_opp >= 0) & (rows.init_opp <= 1) & (rows.pv >= 0) & (rows.sd >= 0)).all()
+            kept = rows[rows.kept]  # a discarded grasp (F-GraspTTA's filter) has no metrics
+            assert rows[~rows.kept].pv.isna().all()
+            assert ((kept.init_opp >= 0) & (kept.init_opp <= 1) & (kept.pv >= 0) & (kept.sd >= 0)).all()
         assert (smoke_run / f"results/figures/predictions_{task}.png").stat().st_size > 20_000
     table = pd.read_csv(smoke_run / "results/tables/table1.csv")
-    labels = {"dataset": "Dataset", "ours": "Ours"}  # the methods' labels (the schema's default methods)
+    labels = {m: cfg["methods"][m]["label"] for m in methods}  # the methods' labels (the schema's default methods)
     assert len(table) == 3 * len(methods) and list(table.method[: len(methods)]) == [labels[m] for m in methods]
     assert table.grasps.sum() > 0
     # The dataset row holds collision-free ground-truth grasps: OPP near zero by construction (the
@@ -265,16 +267,19 @@ def _n_scenes(smoke_run) -> int:
 
 
 N_MAPS = 6  # 3 tasks x (1 train + 1 test) shards in the smoke config (no validation shards)
-# 3 tasks x 2 components; 3 tasks x 2 table methods (dataset, ours); a check per task.
-MODELS = {"train": 6, "predict": 6, "model_checks": 3}
-# The evaluation of every task's predictions: 3 tasks x 2 table methods.
-EVALUATION = {"evaluate": 6, "table": 1, "predictions_figure": 3, "contact_maps_figure": 1}
+# The smoke config's 5 components (contact_diffuser, grasp_diffuser, grasp_cvae, m_grasp_cvae,
+# contact_net) and 6 methods (dataset, grasptta, f-grasptta, ours, m-grasptta-ta, m-grasptta-gt), per task;
+# a check per task; 3 tables (table1, table2, table4), each with a row of every task.
+N_COMPONENTS, N_METHODS, N_TABLES = 5, 6, 3
+MODELS = {"train": 3 * N_COMPONENTS, "predict": 3 * N_METHODS, "model_checks": 3}
+# The evaluation of every task's predictions.
+EVALUATION = {"evaluate": 3 * N_METHODS, "table": N_TABLES, "predictions_figure": 3, "contact_maps_figure": 1}
 
 
 def _evaluated(methods_per_task: int, tasks: int = 3) -> dict[str, int]:
     """The evaluation jobs after ``methods_per_task`` prediction stores of ``tasks`` tasks changed (the
-    figures read ``ours`` of every task)."""
-    return {"evaluate": methods_per_task * tasks, "table": 1, "predictions_figure": tasks, "contact_maps_figure": 1}
+    figures read ``ours`` of every task; every table has a row read from ``ours``)."""
+    return {"evaluate": methods_per_task * tasks, "table": N_TABLES, "predictions_figure": tasks, "contact_maps_figure": 1}
 
 
 def _downstream(n_maps: int) -> dict[str, int]:
@@ -332,9 +337,9 @@ def test_editing_code_makes_exactly_its_stage_stale(smoke_run):
                                           "prior_figure": 1, "maps_figure": 1, "predictions_figure": 3,
                                           "contact_maps_figure": 1}
     with _edited(smoke_run / "tohgs/metrics/tables.py"):
-        assert _stale_jobs(smoke_run) == {"all": 1, "table": 1}
+        assert _stale_jobs(smoke_run) == {"all": 1, "table": N_TABLES}
     with _edited(smoke_run / "tohgs/metrics/evaluate.py"):
-        assert _stale_jobs(smoke_run) == {"all": 1, "evaluate": 6, "table": 1}
+        assert _stale_jobs(smoke_run) == {"all": 1, "evaluate": 3 * N_METHODS, "table": N_TABLES}
     with _edited(smoke_run / "tohgs/sim/world.py"):
         assert _stale_jobs(smoke_run) == {"all": 1, "scenes": n_scenes, "scenes_figure": 3, "task_grasps": n_task,
                                           **_downstream(fed)}
@@ -382,8 +387,9 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
     stacking = dict(cfg["scenes"]["stacking"], max_offset=0.005)
     assert stale_with(("scenes.stacking", stacking)) == {"all": 1, "scenes": n_stacking, "scenes_figure": 1,
                                                          "task_grasps": n_stacking, "maps": _fed_shards(smoke_run, ("stacking",)),
-                                                         "dataset_summary": 1, "maps_figure": 1, "train": 2, "predict": 2,
-                                                         "model_checks": 1, **_evaluated(2, tasks=1),
+                                                         "dataset_summary": 1, "maps_figure": 1, "train": N_COMPONENTS,
+                                                         "predict": N_METHODS, "model_checks": 1,
+                                                         **_evaluated(N_METHODS, tasks=1),
                                                          "contact_maps_figure": 1}
     # A hand setting concerns the hand only (a MANO file needs a path that exists).
     (smoke_run / "MANO_RIGHT.pkl").write_bytes(b"")
@@ -402,22 +408,28 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
     # The expansion tolerance: the task grasps and the maps fed by them; a map size: every shard.
     assert stale_with(("task_grasps.tolerance", 0.003)) == {"all": 1, "task_grasps": n_task, **_downstream(fed)}
     assert stale_with(("maps.points", dict(cfg["maps"]["points"], n_points=96))) == {"all": 1, **DATASET}
-    # A ContactDiffuser size: its three trainings and the predictions that sample from it (not ours-gt-contact);
-    # a sampling setting: the predictions only.
+    # A ContactDiffuser size: its three trainings and the predictions that sample from it (ours and
+    # m-grasptta-ta; not m-grasptta-gt, which reads the ground-truth maps).
     contact = dict(cfg["components"]["contact_diffuser"]["network"], d_model=24)
     assert stale_with(("components.contact_diffuser.network", contact)) == {
-        "all": 1, "train": 3, "predict": 3, "model_checks": 3, **_evaluated(1)}
-    # A sampling setting: the predictions of the methods that sample (not the dataset row's draw).
-    assert stale_with(("prediction", dict(cfg["prediction"], steps=4))) == {"all": 1, "predict": 3, **_evaluated(1)}
+        "all": 1, "train": 3, "predict": 6, "model_checks": 3, **_evaluated(2)}
+    # A sampling setting: the predictions of the methods that sample (not the dataset row's draw; the
+    # grasp_tta kind takes the sampling settings for any generator it is given).
+    assert stale_with(("prediction", dict(cfg["prediction"], steps=4))) == {"all": 1, "predict": 15, **_evaluated(5)}
+    # A test-time adaptation setting: the grasp_tta kind's methods only (3 of them, and the filter of
+    # GraspTTA's predictions), not ours (nor the contact-maps figure, which shows ours).
+    tta = dict(cfg["prediction"]["tta"], steps=cfg["prediction"]["tta"]["steps"] + 1)
+    assert stale_with(("prediction", dict(cfg["prediction"], tta=tta))) == {
+        "all": 1, "predict": 12, "evaluate": 12, "table": N_TABLES, "predictions_figure": 3}
     # A training setting: that component's trainings, their predictions, their evaluation and the tables.
     grasp = dict(cfg["components"]["grasp_diffuser"]["training"], steps=cfg["components"]["grasp_diffuser"]["training"]["steps"] + 1)
     assert stale_with(("components.grasp_diffuser.training", grasp)) == {"all": 1, "train": 3, "predict": 3,
                                                                          "model_checks": 3, **_evaluated(1)}
     # A QR threshold or the table's rows: the tables only; a label: the tables only.
-    assert stale_with(("evaluation.qr", {"max_pv": 2.0e-06, "max_sd": 0.02})) == {"all": 1, "table": 1}
+    assert stale_with(("evaluation.qr", {"max_pv": 2.0e-06, "max_sd": 0.02})) == {"all": 1, "table": N_TABLES}
     assert stale_with(("tables.table1", {"rows": ["ours"]})) == {"all": 1, "table": 1}
     assert stale_with(("methods.ours", {"label": "Ours (CD + GD)", "kind": "contact_grasp", "contact": "contact_diffuser",
-                                        "grasp": "grasp_diffuser"})) == {"all": 1, "table": 1}
+                                        "grasp": "grasp_diffuser"})) == {"all": 1, "table": 1, "predictions_figure": 3}  # table1's label and the figure's
     # The dumps above sort the keys: the order of keys in a config file is not a change.
     assert stale_with(("seed", cfg["seed"])) == {}
 

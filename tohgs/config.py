@@ -173,6 +173,11 @@ def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -
             value, fixed = method[key], spec.get("fixed", [])
             if value in fixed:
                 continue
+            if spec.get("role") == "method":
+                if value not in cfg["methods"] or value == name:
+                    raise ConfigError(f"config key '{where}.{key}': {value!r} is not another method (methods: "
+                                      f"{', '.join(sorted(m for m in cfg['methods'] if m != name))})")
+                continue
             if value not in roles:
                 choices = ", ".join([*fixed, *(c for c, r in roles.items() if r == spec["role"])])
                 raise ConfigError(f"config key '{where}.{key}': {value!r} is not a component (a {spec['role']} "
@@ -184,6 +189,13 @@ def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -
         if extra:
             raise ConfigError(f"config key '{where}.{sorted(extra)[0]}': not a key of a {kind} method "
                               f"(its keys: label, kind, settings{''.join(', ' + k for k in keys)})")
+    for name in cfg["methods"]:  # a method of a method of ... itself cannot be predicted
+        seen, m = [name], name
+        while (base := cfg["methods"][m].get("of")) is not None:
+            if base in seen:
+                raise ConfigError(f"config key 'methods.{name}.of': a cycle of methods ({' -> '.join([*seen, base])})")
+            seen.append(base)
+            m = base
     for name, table in cfg["tables"].items():
         for m in table["rows"]:
             if m not in cfg["methods"]:
@@ -191,6 +203,10 @@ def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -
                                   f"{', '.join(sorted(cfg['methods']))})")
     if cfg["figures"]["method"] not in cfg["methods"]:
         raise ConfigError(f"config key 'figures.method': {cfg['figures']['method']!r} is not a method")
+    for m in cfg["figures"]["methods"]:
+        if m not in cfg["methods"]:
+            raise ConfigError(f"config key 'figures.methods': {m!r} is not a method (methods: "
+                              f"{', '.join(sorted(cfg['methods']))})")
 
 
 def _ordered_ranges(cfg: Mapping[str, Any], schema: Mapping[str, Any]) -> None:

@@ -61,36 +61,52 @@ def _add_hand(world: World, vertices: np.ndarray, faces: np.ndarray) -> int:
     return pb.createMultiBody(0, -1, vis, physicsClientId=world.cid)
 
 
-def plot_predictions(prediction_store: str | Path, scene_stores: list[str | Path], objects_dir: str | Path,
+def plot_predictions(prediction_stores: list[str | Path], scene_stores: list[str | Path], objects_dir: str | Path,
                      supports_json: str | Path, hand: HandAssets, out_png: str | Path, max_configs: int = 4,
-                     size: tuple[int, int] = (360, 270)) -> None:
-    """Test configurations (rows) with the method's first predicted hand at the initial pose (left) and
-    carried to the goal pose (right); target red, obstacles blue, base green, hand skin-coloured."""
-    arrays, attrs = read_predictions(prediction_store)
+                     labels: list[str] | None = None, size: tuple[int, int] = (320, 240)) -> None:
+    """Test configurations (rows) with each method's first kept hand (column pairs, one per store) at the
+    initial pose and carried to the goal pose; the same configurations for every method (those of the
+    first store). Target red, obstacles blue, base green, hand skin-coloured; a panel says so where the
+    method has no prediction for the configuration or discarded all of them."""
+    stores = [read_predictions(p) for p in prediction_stores]
+    labels = labels or [attrs["method"] for _, attrs in stores]
     scenes = {s.object: s for s in (read_scenes(p) for p in scene_stores)}
     supports = read_supports(supports_json)
-    rows = pick_configs(arrays["object_id"], max_configs)
+    first, first_attrs = stores[0]
+    rows = pick_configs(first["object_id"], max_configs)
     if not rows:
-        raise ValueError(f"{prediction_store}: no predicted configuration to draw")
+        raise ValueError(f"{prediction_stores[0]}: no predicted configuration to draw")
+    keys = [(first_attrs["objects"][int(first["object_id"][i])], int(first["config_index"][i])) for i in rows]
     faces = np.asarray(hand.closed_faces)
-    fig, axes = plt.subplots(len(rows), 2, figsize=(7.2, 2.75 * len(rows)), squeeze=False)
+    ncol = 2 * len(stores)
+    fig, axes = plt.subplots(len(rows), ncol, figsize=(1.9 * ncol, 1.6 * len(rows) + 0.4), squeeze=False)
     with World() as world:
-        for r, i in enumerate(rows):
-            name = attrs["objects"][int(arrays["object_id"][i])]
-            sc, c = scenes[name], int(arrays["config_index"][i])
-            for col, which in enumerate(("init", "goal")):
-                target = sc.target_init_pose[c, :3] if which == "init" else sc.target_goal_pose[c, :3]
-                eye, look = close_camera(target, attrs["task"])
-                load_configuration(world, sc, c, objects_dir, supports, which=which, static=True, colors=COLORS)
-                verts = hand.vertices(arrays[f"grasp_{which}"][i, :1])[0]
-                _add_hand(world, verts, faces)
-                axes[r, col].imshow(world.render(eye, look, *size))
-                axes[r, col].set_axis_off()
-                axes[r, col].set_title(f"{name} #{c} {which}", fontsize=8)
-    fig.suptitle(f"{attrs['task']} / {attrs['method']}: a predicted hand (initial | goal)", fontsize=9)
+        for r, (name, c) in enumerate(keys):
+            sc = scenes[name]
+            for m, ((arrays, attrs), label) in enumerate(zip(stores, labels)):
+                where = [i for i in range(len(arrays["object_id"]))
+                         if attrs["objects"][int(arrays["object_id"][i])] == name and int(arrays["config_index"][i]) == c]
+                kept = np.flatnonzero(arrays["kept"][where[0]]) if where else np.zeros(0, int)
+                for k, which in enumerate(("init", "goal")):
+                    ax = axes[r, 2 * m + k]
+                    ax.set_axis_off()
+                    ax.set_title(f"{label}, {which}" if r == 0 else which, fontsize=7)
+                    if not len(kept):
+                        ax.text(0.5, 0.5, "no prediction" if not where else "all discarded", ha="center",
+                                va="center", fontsize=7, transform=ax.transAxes)
+                        continue
+                    target = sc.target_init_pose[c, :3] if which == "init" else sc.target_goal_pose[c, :3]
+                    eye, look = close_camera(target, first_attrs["task"])
+                    load_configuration(world, sc, c, objects_dir, supports, which=which, static=True, colors=COLORS)
+                    _add_hand(world, hand.vertices(arrays[f"grasp_{which}"][where[0], kept[:1]])[0], faces)
+                    ax.imshow(world.render(eye, look, *size))
+            axes[r, 0].text(-0.05, 0.5, f"{name} #{c}", rotation=90, ha="right", va="center", fontsize=7,
+                            transform=axes[r, 0].transAxes)
+    fig.suptitle(f"{first_attrs['task']}: each method's first kept hand (initial | goal), the same configurations",
+                 fontsize=9)
     fig.tight_layout()
     save_figure(fig, out_png)
-    log.info("wrote %s (%d configurations)", out_png, len(rows))
+    log.info("wrote %s (%d configurations x %d methods)", out_png, len(rows), len(stores))
 
 
 def plot_contact_maps(prediction_stores: list[str | Path], test_shards: list[str | Path], out_png: str | Path,

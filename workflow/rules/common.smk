@@ -213,8 +213,14 @@ COMPONENT_NAME, METHOD_NAME, TABLE_NAME = _names(COMPONENTS), _names(METHODS), _
 
 def used_methods():
     """The methods a table or the figures use, in first-use order: only these are predicted."""
-    names = [m for t in TABLES.values() for m in t["rows"]] + [config["figures"]["method"]]
-    return list(dict.fromkeys(names))
+    names = [m for t in TABLES.values() for m in t["rows"]] + [config["figures"]["method"], *config["figures"]["methods"]]
+    out = []
+    for m in names:  # with the methods they are of (kind filtered), first
+        chain = [m]
+        while "of" in METHODS[chain[-1]]:
+            chain.append(METHODS[chain[-1]]["of"])
+        out += reversed(chain)
+    return list(dict.fromkeys(out))
 
 
 def components_of(method):
@@ -236,10 +242,19 @@ def component_settings(wildcards):
 _SETTING_KEYS = {kind: method_setting_keys(kind, _SCHEMA) for kind in {m["kind"] for m in METHODS.values()}}
 
 
+def _overlaid(base, overlay):
+    """``base`` with ``overlay``'s keys, sub-blocks merged key by key (a method's ``filter: {transform: icp}``
+    keeps the other filter settings)."""
+    out = dict(base)
+    for k, v in overlay.items():
+        out[k] = _overlaid(base[k], v) if isinstance(v, dict) and isinstance(base.get(k), dict) else v
+    return out
+
+
 def method_settings(wildcards):
     """The sampling settings of one method: the prediction block overlaid with the method's own, only those
     its kind reads (so a sampler setting leaves the dataset row's draw be)."""
-    settings = {**config["prediction"], **METHODS[wildcards.method]["settings"]}
+    settings = _overlaid(config["prediction"], METHODS[wildcards.method]["settings"])
     keys = _SETTING_KEYS[METHODS[wildcards.method]["kind"]]
     return _canonical({k: v for k, v in settings.items() if keys is None or k in keys})
 
@@ -252,6 +267,12 @@ def method_block(wildcards):
 def method_models(wildcards):
     """The checkpoints of the method's components for the task."""
     return [f"results/models/{wildcards.task}/{c}.pt" for c in components_of(wildcards.method)]
+
+
+def method_base(wildcards):
+    """The prediction store of the method this one is of (kind filtered), or none."""
+    base = METHODS[wildcards.method].get("of")
+    return [f"results/predictions/{wildcards.task}/{base}.zarr"] if base else []
 
 
 def method_code(wildcards):

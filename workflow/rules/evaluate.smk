@@ -39,7 +39,8 @@ rule table:
         code=code("table.py"),
         tasks=setting("scenes", "tasks"),
         rows=lambda w: setting("tables", w.table, "rows"),
-        labels=lambda w: {m: METHODS[m]["label"] for m in TABLES[w.table]["rows"]},
+        labels=lambda w: {m: TABLES[w.table]["labels"].get(m, METHODS[m]["label"]) for m in TABLES[w.table]["rows"]},
+        pending=lambda w: setting("tables", w.table, "pending"),
         columns=lambda w: setting("tables", w.table, "columns"),
         qr=setting("evaluation", "qr"),
         qr_grid=setting("evaluation", "qr_grid"),
@@ -53,7 +54,7 @@ rule table:
 
 rule predictions_figure:
     input:
-        predictions=f"results/predictions/{{task}}/{config['figures']['method']}.zarr",
+        predictions=expand("results/predictions/{{task}}/{method}.zarr", method=config["figures"]["methods"]),
         scenes=test_scene_stores,
         objects=object_dirs(),
         supports="results/objects/supports",
@@ -64,6 +65,7 @@ rule predictions_figure:
         code=code("predictions_figure.py"),
         objects_dir=objects_dir_of_supports,
         configs=setting("figures", "prediction_configs"),
+        labels=lambda w: [METHODS[m]["label"] for m in config["figures"]["methods"]],
     conda:
         "../envs/tohgs.yaml"
     log:

@@ -30,6 +30,8 @@ rule predict:
     input:
         shards=test_shards,
         models=method_models,
+        hand="results/hand/hand.npz",
+        base=method_base,
     output:
         directory("results/predictions/{task}/{method}.zarr"),
     params:

@@ -7,5 +7,5 @@ from tohgs.hand import HandAssets  # noqa: E402
 from tohgs.viz.predictions import plot_predictions  # noqa: E402
 
 inp = snakemake.input
-plot_predictions(inp.predictions, inp.scenes, snakemake.params.objects_dir, f"{inp.supports}/supports.json",
-                 HandAssets.load(inp.hand), snakemake.output[0], snakemake.params.configs)
+plot_predictions(list(inp.predictions), inp.scenes, snakemake.params.objects_dir, f"{inp.supports}/supports.json",
+                 HandAssets.load(inp.hand), snakemake.output[0], snakemake.params.configs, snakemake.params.labels)

@@ -10,12 +10,13 @@ from tohgs.metrics.tables import QualityThresholds, markdown, metric_table, qr_g
 
 p, out = snakemake.params, snakemake.output
 rows = read_metrics(snakemake.input.metrics)
-table = metric_table(rows, p.tasks, p.rows, p.labels, p.columns, QualityThresholds(**p.qr))
+pending = {row["label"]: row["reason"] for row in p.pending}
+table = metric_table(rows, p.tasks, p.rows, p.labels, p.columns, QualityThresholds(**p.qr), list(pending))
 grid = qr_grid(rows, p.tasks, p.rows, p.labels, p.qr_grid["max_pv"], p.qr_grid["max_sd"])
 with atomic_path(out.csv) as tmp:
     table.to_csv(tmp, index=False, float_format="%.6g")
 with atomic_path(out.md) as tmp, open(tmp, "w") as fh:
-    fh.write(markdown(table))
+    fh.write(markdown(table, notes=pending))
 with atomic_path(out.grid) as tmp:
     grid.to_csv(tmp, index=False, float_format="%.6g")
-logging.getLogger("table").info("%s\n%s", out.csv, markdown(table))
+logging.getLogger("table").info("%s\n%s", out.csv, markdown(table, notes=pending))
