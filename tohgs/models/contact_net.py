@@ -7,7 +7,7 @@ pooled PointNet feature and the point's current contact value with the hand (``1
 - 0.5)``, d the distance to the nearest hand vertex); a per-point MLP with a sigmoid gives the map. The
 official network fuses the two clouds' per-point features with a convolution across their point indices
 (3778 -> 3000), which fixes the point count and has to learn distance from scratch; giving the distance
-directly does neither.
+directly does neither. Both PointNets read decimetres, as GraspCVAE's (``ENCODER_SCALE``).
 
 Training (the official training code is not public): the input hand is the true grasp perturbed (Gaussian
 noise on the translation, the global rotation and the finger numbers, ``noise``), the target the true
@@ -29,7 +29,7 @@ from tohgs.data.batch import Batch
 from tohgs.geometry.hand_object import contact_values
 from tohgs.hand.model import HandModel
 from tohgs.models.component import Component
-from tohgs.models.grasp_cvae import _mlp, bbox_diagonal
+from tohgs.models.grasp_cvae import ENCODER_SCALE, _mlp, bbox_diagonal
 from tohgs.models.pointnet2 import PointNet
 
 
@@ -87,8 +87,8 @@ class ContactNet(Component):
     def object_features(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The object encoder's per-point (B, N, F) and pooled (B, F) features of (B, N, 3) points (what
         does not change while a hand is adapted: computed once)."""
-        diag = bbox_diagonal(points)[:, None, None].expand(-1, points.shape[1], 1)
-        return self.object_encoder(points, diag)
+        diag = ENCODER_SCALE * bbox_diagonal(points)[:, None, None].expand(-1, points.shape[1], 1)
+        return self.object_encoder(ENCODER_SCALE * points, diag)
 
     def predict_map(self, points: torch.Tensor, hand_verts: torch.Tensor, current: torch.Tensor | None = None,
                     object_features: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
@@ -101,7 +101,7 @@ class ContactNet(Component):
         local, glob = self.object_features(points) if object_features is None else object_features
         k = v if self.cfg.hand_points <= 0 else min(v, self.cfg.hand_points)
         hp = hand_verts[:, torch.linspace(0, v - 1, k, device=hand_verts.device).round().long()]
-        hand_glob = self.hand_encoder(hp, hp[..., :0])[1]
+        hand_glob = self.hand_encoder(ENCODER_SCALE * hp, hp[..., :0])[1]
         h = self.point_in(torch.cat([local, current[..., None]], -1)) + self.pooled_in(torch.cat([glob, hand_glob], -1))[:, None]
         return torch.sigmoid(self.head(h)[..., 0])
 

@@ -6,10 +6,15 @@ conditioned on the object cloud, with the hand model in the loss.
   ``contact_channel`` the contact map as one more channel: M-GraspTTA (paper section 5.1), whose input
   carries a (predicted or ground-truth) task-aware map. Without it the model is object-centric: it sees
   the object cloud only, no scene, no task.
-- Hand encoder (training only): a PointNet on the true hand's vertices.
+- Hand encoder (training only): a PointNet on the true hand's vertices, each carrying its rest position
+  as its feature (which vertex it is).
+- Both PointNets read coordinates in decimetres (``ENCODER_SCALE``: in metres the LayerNorms leave
+  almost no geometry, and the model does not learn).
 - Encoder MLP on both global features -> mean and log-variance of a ``latent``-d Gaussian; decoder MLP on
-  ``[z, object feature]`` -> the normalised 51-number grasp (the training grasps' per-dimension mean and
-  std, after the augmentation, as GraspDiffuser's normaliser). At inference z ~ N(0, I).
+  ``[z, object feature]`` -> the grasp as a normalised palm-centred 6D vector (54 numbers,
+  :mod:`tohgs.geometry.rot6d`: continuous where the axis-angle jumps; per-dimension mean and std of the
+  training grasps after the augmentation, as GraspDiffuser's normaliser), turned back into the 51 numbers.
+  At inference z ~ N(0, I).
 
 Sizes (GraspTTA: 1024-d PointNet features, encoder [2048, 512, 256], decoder [1088, 1024, 256], 64-d latent,
 3000 points) are config values; the default is laptop-sized.
@@ -19,7 +24,7 @@ are for its units, ours are for the units below and are config values):
 
 ``L = w_param L_param + w_recon L_recon + w_kl KL + w_pen min(L_pen, 1) + w_cons L_cons``
 
-- ``L_param``: squared error of the normalised vector, summed over its 51 numbers;
+- ``L_param``: squared error of the normalised vector, summed over its 54 numbers;
 - ``L_recon``: squared distance of the decoded hand's vertices to the true hand's, summed (m^2);
 - ``KL``: of the posterior from N(0, I), summed over the latent;
 - ``L_pen``, ``L_cons``: GraspDiffuser's penetration and contact-consistency terms
@@ -38,12 +43,18 @@ from torch import nn
 from tohgs.config import settings_from
 from tohgs.data.batch import Batch
 from tohgs.geometry.grasp import GRASP_DIM
+from tohgs.geometry.rot6d import VECTOR_DIM, grasp_from_palm_rot6d, palm_rot6d
 from tohgs.geometry.hand_object import contact_values, inside_hand, vertex_normals
 from tohgs.hand.model import HandModel
 from tohgs.models.component import Component, seen_grasps
 from tohgs.models.pointnet2 import PointNet
 
 PAPER_POINTS = 2048  # the point sums of L_pen and L_cons are scaled to this many points
+# The PointNets read coordinates (and the bounding-box diagonal) in decimetres: in metres a hand or an
+# object spans about 0.2 units, so the first layer's output is its bias plus a small xyz term, and the
+# LayerNorm after it all but removes the geometry (a model trained so did not learn: its posterior
+# collapsed and its grasps were the mean grasp). GraspTTA's PointNets normalise with BatchNorm instead.
+ENCODER_SCALE = 10.0
 
 
 @dataclass(frozen=True)
@@ -100,13 +111,15 @@ class GraspCVAE(Component):
         self.cfg = cfg
         self._training: dict = {}
         self.object_encoder = PointNet(1 + int(cfg.contact_channel), list(cfg.object_mlp))
-        self.hand_encoder = PointNet(0, list(cfg.hand_mlp))
+        self.hand_encoder = PointNet(3, list(cfg.hand_mlp))  # posed xyz, with each vertex's rest xyz
         fo, fh = self.object_encoder.global_dim, self.hand_encoder.global_dim
         self.encoder = _mlp([fo + fh, *cfg.encoder], last_plain=False)
         self.to_stats = nn.Linear(cfg.encoder[-1] if cfg.encoder else fo + fh, 2 * cfg.latent)
-        self.decoder = _mlp([cfg.latent + fo, *cfg.decoder, GRASP_DIM])
-        self.register_buffer("grasp_mean", torch.zeros(GRASP_DIM))
-        self.register_buffer("grasp_std", torch.ones(GRASP_DIM))
+        self.decoder = _mlp([cfg.latent + fo, *cfg.decoder, VECTOR_DIM])
+        self.register_buffer("grasp_mean", torch.zeros(VECTOR_DIM))
+        self.register_buffer("grasp_std", torch.ones(VECTOR_DIM))
+        self.register_buffer("wrist", torch.zeros(3))
+        self.register_buffer("palm", torch.zeros(3))
 
     # -- the data the training fixes ---------------------------------------------------------------------
     def prepare(self, data, task: str, hand: HandModel | None = None) -> None:
@@ -114,6 +127,8 @@ class GraspCVAE(Component):
         augmentation presents them, and the shards' contact alpha."""
         if hand is None:
             raise ValueError("GraspCVAE trains with the hand model in the loss; pass hand=")
+        self.wrist.copy_(hand.rest_joints[0].to(self.wrist))
+        self.palm.copy_(hand.rest_vertices[torch.as_tensor(hand.assets.palm_ids)].mean(0).to(self.palm))
         grasps = seen_grasps(self, data, self.grasp_mean.device)
         self.grasp_mean.copy_(grasps.mean(0))
         std = grasps.std(0) if grasps.shape[0] > 1 else torch.zeros_like(grasps[0])
@@ -121,8 +136,9 @@ class GraspCVAE(Component):
         self._training = {"hand": hand, "alpha_contact": float(data.shards[0].attrs.get("alpha_contact", 100.0))}
 
     def in_frame(self, grasp: torch.Tensor, points: torch.Tensor, contact: torch.Tensor) -> torch.Tensor:
-        """The grasps as the network sees them (the network frame itself: no change)."""
-        return grasp
+        """(B, 54) the grasps as the network regresses them: palm-centred 6D vectors of the network frame
+        (:mod:`tohgs.geometry.rot6d`; what the normaliser measures)."""
+        return palm_rot6d(grasp, self.wrist, self.palm)
 
     def normaliser(self) -> dict[str, torch.Tensor]:
         return {"mean": self.grasp_mean.detach().cpu().clone(), "std": self.grasp_std.detach().cpu().clone()}
@@ -131,20 +147,23 @@ class GraspCVAE(Component):
     def object_feature(self, points: torch.Tensor, contact: torch.Tensor | None) -> torch.Tensor:
         """(B, F) the object encoder's global feature of (B, N, 3) points (with their (B, N) map when the
         model has the contact channel)."""
-        diag = bbox_diagonal(points)[:, None, None].expand(-1, points.shape[1], 1)
+        diag = ENCODER_SCALE * bbox_diagonal(points)[:, None, None].expand(-1, points.shape[1], 1)
         feats = [diag]
         if self.cfg.contact_channel:
             if contact is None:
                 raise ValueError("this GraspCVAE reads a contact map (contact_channel); the batch has none")
             feats.append(contact[..., None])
-        return self.object_encoder(points, torch.cat(feats, -1))[1]
+        return self.object_encoder(ENCODER_SCALE * points, torch.cat(feats, -1))[1]
 
-    def hand_feature(self, hand_verts: torch.Tensor) -> torch.Tensor:
-        """(B, F) the hand encoder's global feature of (B, V, 3) hand vertices."""
+    def hand_feature(self, hand_verts: torch.Tensor, rest_vertices: torch.Tensor) -> torch.Tensor:
+        """(B, F) the hand encoder's global feature of (B, V, 3) posed hand vertices; each vertex carries its
+        (V, 3) rest position as its feature (which vertex it is: a max-pooled PointNet that sees only the
+        posed cloud must infer the hand's orientation from its shape, and learned it too slowly here)."""
         v = hand_verts.shape[1]
         k = v if self.cfg.hand_points <= 0 else min(v, self.cfg.hand_points)
-        pts = hand_verts[:, torch.linspace(0, v - 1, k, device=hand_verts.device).round().long()]
-        return self.hand_encoder(pts, pts[..., :0])[1]
+        ids = torch.linspace(0, v - 1, k, device=hand_verts.device).round().long()
+        rest = (ENCODER_SCALE * rest_vertices[ids].to(hand_verts))[None].expand(hand_verts.shape[0], -1, -1)
+        return self.hand_encoder(ENCODER_SCALE * hand_verts[:, ids], rest)[1]
 
     def posterior(self, obj: torch.Tensor, hand_feat: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Mean and log-variance (B, latent) of q(z | object, hand)."""
@@ -152,12 +171,17 @@ class GraspCVAE(Component):
         mu, logvar = stats.chunk(2, -1)
         return mu, logvar.clamp(-10.0, 10.0)
 
+    def decode_vector(self, z: torch.Tensor, obj: torch.Tensor) -> torch.Tensor:
+        """(B, 54) normalised vectors from latents (B, latent) and object features (B, F)."""
+        return self.decoder(torch.cat([z, obj], -1))
+
     def decode(self, z: torch.Tensor, obj: torch.Tensor) -> torch.Tensor:
         """(B, 51) network-frame grasps from latents (B, latent) and object features (B, F)."""
-        return self.decoder(torch.cat([z, obj], -1)) * self.grasp_std + self.grasp_mean
+        return grasp_from_palm_rot6d(self.decode_vector(z, obj) * self.grasp_std + self.grasp_mean, self.wrist, self.palm)
 
     def normalise(self, grasp: torch.Tensor) -> torch.Tensor:
-        return (grasp - self.grasp_mean) / self.grasp_std
+        """(B, 54) the normalised vectors of (B, 51) grasps."""
+        return (palm_rot6d(grasp, self.wrist, self.palm) - self.grasp_mean) / self.grasp_std
 
     # -- training and sampling ---------------------------------------------------------------------------
     def loss(self, batch: Batch, generator: torch.Generator) -> dict[str, torch.Tensor]:
@@ -169,11 +193,12 @@ class GraspCVAE(Component):
         with torch.no_grad():
             true_v = hand(batch.grasp).vertices
         obj = self.object_feature(batch.points, batch.contact)
-        mu, logvar = self.posterior(obj, self.hand_feature(true_v))
+        mu, logvar = self.posterior(obj, self.hand_feature(true_v, hand.rest_vertices))
         eps = torch.randn(mu.shape, generator=generator).to(dev)
         z = mu + (0.5 * logvar).exp() * eps
-        pred = self.decode(z, obj)
-        terms = self.terms(hand, pred, batch, true_v)
+        vec = self.decode_vector(z, obj)
+        pred = grasp_from_palm_rot6d(vec * self.grasp_std + self.grasp_mean, self.wrist, self.palm)
+        terms = self.terms(hand, pred, vec, batch, true_v)
         terms["kl"] = 0.5 * (mu**2 + logvar.exp() - 1 - logvar).sum(-1)
         c = self.cfg
         weighted = {"param": c.w_param * terms["param"].mean(), "recon": c.w_recon * terms["recon"].mean(),
@@ -182,11 +207,13 @@ class GraspCVAE(Component):
         return {"loss": sum(weighted.values()), **{k: v.mean() for k, v in terms.items()},
                 **{f"w_{k}": v for k, v in weighted.items()}}
 
-    def terms(self, hand: HandModel, pred: torch.Tensor, batch: Batch, true_v: torch.Tensor) -> dict[str, torch.Tensor]:
+    def terms(self, hand: HandModel, pred: torch.Tensor, vec: torch.Tensor, batch: Batch, true_v: torch.Tensor
+              ) -> dict[str, torch.Tensor]:
         """The per-sample (B,) parameter, vertex, penetration and consistency terms of (B, 51) decoded grasps
-        against the batch's true grasps (whose (B, V, 3) vertices are ``true_v``)."""
+        (their (B, 54) normalised vectors ``vec``) against the batch's true grasps (whose (B, V, 3) vertices
+        are ``true_v``)."""
         scale = PAPER_POINTS / batch.points.shape[1]
-        l_param = ((self.normalise(pred) - self.normalise(batch.grasp)) ** 2).sum(-1)
+        l_param = ((vec - self.normalise(batch.grasp)) ** 2).sum(-1)
         pred_v = hand(pred).vertices
         l_recon = ((pred_v - true_v) ** 2).sum((-1, -2))
         c_pred, idx = contact_values(batch.points, pred_v, self._training["alpha_contact"])
@@ -199,7 +226,7 @@ class GraspCVAE(Component):
     def reconstruct(self, batch: Batch, hand: HandModel) -> torch.Tensor:
         """(B, 51) the posterior-mean reconstructions of the batch's grasps (the sanity check's measure)."""
         obj = self.object_feature(batch.points, batch.contact)
-        mu, _ = self.posterior(obj, self.hand_feature(hand(batch.grasp).vertices))
+        mu, _ = self.posterior(obj, self.hand_feature(hand(batch.grasp).vertices, hand.rest_vertices))
         return self.decode(mu, obj)
 
     @torch.no_grad()
