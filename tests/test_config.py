@@ -69,7 +69,7 @@ def test_defaults_are_filled_in_place():
         ({"methods": {"Ours": {"label": "X", "kind": "reference"}}}, "methods", "does not match"),
         ({"tables": {"table1": {"rows": ["dataset", "oracle"]}}}, "tables.table1.rows", "is not a method"),
         ({"tables": {"t2": {"rows": ["ours"], "columns": ["tss"]}}}, "tables.t2.columns.0", "is not one of"),
-        ({"figures": {"method": "oracle"}}, "figures.method", "is not a method"),
+        ({"figures": {"contact_methods": ["ours", "oracle"]}}, "figures.contact_methods", "is not a method"),
         ({"figures": {"methods": ["ours", "oracle"]}}, "figures.methods", "is not a method"),
         ({"methods": {"grasptta": {"contact_net": "contact_diffuser"}}}, "methods.grasptta.contact_net",
          "must be a hand_contact component"),
@@ -113,8 +113,8 @@ def test_a_config_adds_methods_and_tables_to_the_built_in_ones_and_fills_their_d
                            "tables": {"samplers": {"rows": ["ours", "ours-ddpm"]}},
                            "components": {"grasp_diffuser": {"kind": "grasp_diffuser", "network": {"d_model": 32}}}})
     assert set(cfg["methods"]) == {"dataset", "ours", "ours-gt-contact", "grasptta", "f-grasptta", "m-grasptta-ta",
-                                   "m-grasptta-gt", "ours-ddpm"}
-    assert set(cfg["tables"]) == {"table1", "table2", "table4", "samplers"}
+                                   "m-grasptta-gt", "contactgen", "cc-gd", "ours-ddpm"}
+    assert set(cfg["tables"]) == {"table1", "table2", "table4", "table5", "samplers"}
     assert cfg["tables"]["samplers"]["columns"][-1] == "discarded" and cfg["tables"]["samplers"]["pending"] == []
     gd = cfg["components"]["grasp_diffuser"]
     # a built-in entry overlaid: the keys the config does not give come from the built-in one
@@ -134,12 +134,14 @@ def test_the_settings_dataclasses_default_to_the_schema():
     from tohgs.methods.filtered import FilterSettings
     from tohgs.models.contact_net import ContactNetConfig
     from tohgs.models.grasp_cvae import GraspCVAEConfig
+    from tohgs.models.contact_gen import ContactGenConfig
+    from tohgs.grasps.contactgen_solver import SolverSettings
     from tohgs.models.train import TrainSettings
 
     cfg = validate_config({})
     schema = load_schema()
     networks = {}
-    for kind in ("contact_diffuser", "grasp_diffuser", "grasp_cvae", "contact_net"):
+    for kind in ("contact_diffuser", "grasp_diffuser", "grasp_cvae", "contact_net", "contact_gen"):
         networks[kind] = {}
         from tohgs.config import _fill_defaults
 
@@ -148,7 +150,8 @@ def test_the_settings_dataclasses_default_to_the_schema():
     pairs = [(TrainSettings, cfg["training"]), (PredictSettings, pred), (TTASettings, pred["tta"]),
              (FilterSettings, pred["filter"]), (ICPSettings, pred["filter"]["icp"]),
              (ContactDiffuserConfig, networks["contact_diffuser"]), (GraspDiffuserConfig, networks["grasp_diffuser"]),
-             (GraspCVAEConfig, networks["grasp_cvae"]), (ContactNetConfig, networks["contact_net"])]
+             (GraspCVAEConfig, networks["grasp_cvae"]), (ContactNetConfig, networks["contact_net"]),
+             (ContactGenConfig, networks["contact_gen"]), (SolverSettings, pred["contactgen"])]
     for cls, block in pairs:
         for f in dataclasses.fields(cls):
             value = getattr(cls(), f.name)

@@ -267,10 +267,11 @@ def _n_scenes(smoke_run) -> int:
 
 
 N_MAPS = 6  # 3 tasks x (1 train + 1 test) shards in the smoke config (no validation shards)
-# The smoke config's 5 components (contact_diffuser, grasp_diffuser, grasp_cvae, m_grasp_cvae,
-# contact_net) and 6 methods (dataset, grasptta, f-grasptta, ours, m-grasptta-ta, m-grasptta-gt), per task;
-# a check per task; 3 tables (table1, table2, table4), each with a row of every task.
-N_COMPONENTS, N_METHODS, N_TABLES = 5, 6, 3
+# The smoke config's 7 components (contact_diffuser, grasp_diffuser, grasp_cvae, m_grasp_cvae,
+# contact_net, contact_gen, contact_cvae) and 9 methods (dataset, grasptta, f-grasptta, contactgen, ours,
+# m-grasptta-oc, m-grasptta-ta, m-grasptta-gt, cc-gd), per task; a check per task; 4 tables (table1,
+# table2, table4, table5), each with a row of every task.
+N_COMPONENTS, N_METHODS, N_TABLES = 7, 9, 4
 MODELS = {"train": 3 * N_COMPONENTS, "predict": 3 * N_METHODS, "model_checks": 3}
 # The evaluation of every task's predictions.
 EVALUATION = {"evaluate": 3 * N_METHODS, "table": N_TABLES, "predictions_figure": 3, "contact_maps_figure": 1}
@@ -413,23 +414,24 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
     contact = dict(cfg["components"]["contact_diffuser"]["network"], d_model=24)
     assert stale_with(("components.contact_diffuser.network", contact)) == {
         "all": 1, "train": 3, "predict": 6, "model_checks": 3, **_evaluated(2)}
-    # A sampling setting: the predictions of the methods that sample (not the dataset row's draw; the
-    # grasp_tta kind takes the sampling settings for any generator it is given).
-    assert stale_with(("prediction", dict(cfg["prediction"], steps=4))) == {"all": 1, "predict": 15, **_evaluated(5)}
-    # A test-time adaptation setting: the grasp_tta kind's methods only (3 of them, and the filter of
+    # A sampling setting: the predictions of the methods that sample with it (not the dataset row's draw,
+    # nor ContactGen's CVAE; the grasp_tta kind takes the sampling settings for any generator it is given).
+    assert stale_with(("prediction", dict(cfg["prediction"], steps=4))) == {"all": 1, "predict": 21, **_evaluated(7)}
+    # A test-time adaptation setting: the grasp_tta kind's methods only (4 of them, and the filter of
     # GraspTTA's predictions), not ours (nor the contact-maps figure, which shows ours).
     tta = dict(cfg["prediction"]["tta"], steps=cfg["prediction"]["tta"]["steps"] + 1)
     assert stale_with(("prediction", dict(cfg["prediction"], tta=tta))) == {
-        "all": 1, "predict": 12, "evaluate": 12, "table": N_TABLES, "predictions_figure": 3}
+        "all": 1, "predict": 15, "evaluate": 15, "table": 3, "predictions_figure": 3}  # not table5
     # A training setting: that component's trainings, their predictions, their evaluation and the tables.
     grasp = dict(cfg["components"]["grasp_diffuser"]["training"], steps=cfg["components"]["grasp_diffuser"]["training"]["steps"] + 1)
-    assert stale_with(("components.grasp_diffuser.training", grasp)) == {"all": 1, "train": 3, "predict": 3,
-                                                                         "model_checks": 3, **_evaluated(1)}
+    assert stale_with(("components.grasp_diffuser.training", grasp)) == {"all": 1, "train": 3, "predict": 6,
+                                                                         "model_checks": 3, **_evaluated(2)}  # ours, cc-gd
     # A QR threshold or the table's rows: the tables only; a label: the tables only.
     assert stale_with(("evaluation.qr", {"max_pv": 2.0e-06, "max_sd": 0.02})) == {"all": 1, "table": N_TABLES}
     assert stale_with(("tables.table1", {"rows": ["ours"]})) == {"all": 1, "table": 1}
     assert stale_with(("methods.ours", {"label": "Ours (CD + GD)", "kind": "contact_grasp", "contact": "contact_diffuser",
-                                        "grasp": "grasp_diffuser"})) == {"all": 1, "table": 1, "predictions_figure": 3}  # table1's label and the figure's
+                                        "grasp": "grasp_diffuser"})) == {"all": 1, "table": 1, "predictions_figure": 3,
+                                                         "contact_maps_figure": 1}  # table1's label and the figures'
     # The dumps above sort the keys: the order of keys in a config file is not a change.
     assert stale_with(("seed", cfg["seed"])) == {}
 

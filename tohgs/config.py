@@ -201,12 +201,11 @@ def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -
             if m not in cfg["methods"]:
                 raise ConfigError(f"config key 'tables.{name}.rows': {m!r} is not a method (methods: "
                                   f"{', '.join(sorted(cfg['methods']))})")
-    if cfg["figures"]["method"] not in cfg["methods"]:
-        raise ConfigError(f"config key 'figures.method': {cfg['figures']['method']!r} is not a method")
-    for m in cfg["figures"]["methods"]:
-        if m not in cfg["methods"]:
-            raise ConfigError(f"config key 'figures.methods': {m!r} is not a method (methods: "
-                              f"{', '.join(sorted(cfg['methods']))})")
+    for key in ("methods", "contact_methods"):
+        for m in cfg["figures"][key]:
+            if m not in cfg["methods"]:
+                raise ConfigError(f"config key 'figures.{key}': {m!r} is not a method (methods: "
+                                  f"{', '.join(sorted(cfg['methods']))})")
 
 
 def _ordered_ranges(cfg: Mapping[str, Any], schema: Mapping[str, Any]) -> None:

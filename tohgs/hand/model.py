@@ -3,7 +3,8 @@
 A backend (``anny``, ``mano``) only produces :class:`HandAssets`, arrays in MANO's canonical frame; one
 :class:`HandModel` turns them into a batched, differentiable forward pass on any device:
 
-``forward(pose (B, 51), betas (B, 10) or None) -> HandOutput(vertices (B, V, 3), joints (B, 21, 3))``, metres.
+``forward(pose (B, 51), betas (B, 10) or None) -> HandOutput(vertices (B, V, 3), joints (B, 21, 3), rotations
+(B, 16, 3, 3))``, metres.
 
 The kinematics are MANO's: rest joints with world-aligned frames; joint ``k``'s global transform is
 ``G_k = G_parent(k) [R_k | J_k - J_parent(k)]`` with ``G_0 = [R_0 | J_0]`` (so the global rotation turns
@@ -49,10 +50,14 @@ class HandOutput:
             (B, 3, V) tensor: ``vertices.transpose(1, 2)`` is free, and per-coordinate work streams.
         joints: (B, 21, 3) metres: the 16 joints in MANO order, then the 5 fingertips
             (thumb, index, middle, ring, pinky).
+        rotations: (B, 16, 3, 3) each joint's global rotation (its frame's axes in world coordinates;
+            the rest frames are world-aligned): joint ``k``'s frame is ``(rotations[:, k], joints[:, k])``,
+            the frame ContactGen's part directions are expressed in.
     """
 
     vertices: torch.Tensor
     joints: torch.Tensor
+    rotations: torch.Tensor
 
 
 class HandModel(torch.nn.Module):
@@ -131,7 +136,8 @@ class HandModel(torch.nn.Module):
             betas: (B, 10) shape parameters, or ``None`` for the average hand.
 
         Returns:
-            :class:`HandOutput` with vertices (B, V, 3) and joints (B, 21, 3), metres.
+            :class:`HandOutput` with vertices (B, V, 3) and joints (B, 21, 3), metres, and the joints'
+            global rotations (B, 16, 3, 3).
         """
         if pose.ndim != 2 or pose.shape[1] != POSE_DIM:
             raise ValueError(f"pose must have shape (B, {POSE_DIM}), got {tuple(pose.shape)}")
@@ -170,4 +176,4 @@ class HandModel(torch.nn.Module):
             verts = (T[..., :3] * v_rest[:, :, None, :]).sum(-1) + T[..., 3] + trans
             tips = verts[:, self.tip_ids]
         joints = torch.cat([P + trans, tips], 1)
-        return HandOutput(vertices=verts, joints=joints)
+        return HandOutput(vertices=verts, joints=joints, rotations=R)

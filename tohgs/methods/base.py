@@ -16,9 +16,9 @@ from tohgs.data.maps import MapShard
 class PredictSettings:
     """``samples`` S per configuration (the paper's 16); sampler ``ddpm`` (all T steps) or ``ddim`` with
     ``steps`` steps; ``seed``; ``device``; GraspDiffuser's classifier-free ``guidance`` scale;
-    ``contact_smoothing``, the neighbours over which ContactDiffuser's maps are averaged (0: none); ``tta``
-    and ``filter``, GraspTTA's adaptation and F-GraspTTA's filter (:mod:`tohgs.methods.grasp_tta`,
-    :mod:`tohgs.methods.filtered`). A
+    ``contact_smoothing``, the neighbours over which ContactDiffuser's maps are averaged (0: none); ``tta``,
+    ``filter`` and ``contactgen``: GraspTTA's adaptation, F-GraspTTA's filter and ContactGen's solver
+    (:mod:`tohgs.methods.grasp_tta`, :mod:`tohgs.methods.filtered`, :mod:`tohgs.methods.contact_gen`). A
     method's ``settings`` block overlays the config's ``prediction`` block (the two sub-blocks key by key)."""
 
     samples: int = 16
@@ -31,6 +31,7 @@ class PredictSettings:
     contact_smoothing: int = 0  # k of smooth_contact for a contact component's maps (0 or 1: none)
     tta: dict = field(default_factory=dict)  # tohgs.grasps.tta.TTASettings
     filter: dict = field(default_factory=dict)  # tohgs.methods.filtered.FilterSettings
+    contactgen: dict = field(default_factory=dict)  # tohgs.grasps.contactgen_solver.SolverSettings
 
 
 @dataclass

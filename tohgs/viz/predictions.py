@@ -110,40 +110,58 @@ def plot_predictions(prediction_stores: list[str | Path], scene_stores: list[str
 
 
 def plot_contact_maps(prediction_stores: list[str | Path], test_shards: list[str | Path], out_png: str | Path,
-                      per_task: int = 2, samples: int = 3) -> None:
+                      per_task: int = 2, samples: int = 2, labels: dict[str, str] | None = None) -> None:
     """Per task, test configurations with ground-truth grasps (rows): a ground-truth contact map, then
-    ``samples`` predicted maps of the same configuration, on the object cloud (1 = touching)."""
+    ``samples`` sampled maps of the same configuration from each method (the stores' methods, in their
+    order; ``labels`` names them), on the object cloud (1 = touching). The configurations are picked from
+    each task's first method and drawn for every method that predicted them."""
+    labels = labels or {}
     shards: dict[str, list] = {}
     for p in test_shards:
         sh = read_map_shard(p)
         shards.setdefault(sh.attrs["task"], []).append(sh)
-    picks = []
+    stores: dict[str, dict[str, tuple]] = {}  # task -> method -> (arrays, row of (object, config))
     for store in prediction_stores:
         arrays, attrs = read_predictions(store)
         key = {(int(o), int(c)): i for i, (o, c) in enumerate(zip(arrays["object_id"], arrays["config_index"]))}
+        stores.setdefault(attrs["task"], {})[attrs["method"]] = (arrays, key)
+    methods = list(dict.fromkeys(m for by in stores.values() for m in by))
+    picks = []
+    for task, by_method in stores.items():
+        arrays, key = next(iter(by_method.values()))
         found = []
-        for sh in shards.get(attrs["task"], []):
+        for sh in shards.get(task, []):
             for c in np.unique(sh.grasp_config):
                 k = (int(sh.object_id[c]), int(sh.config_index[c]))
                 if k in key:
-                    found.append((sh, int(c), int(np.flatnonzero(sh.grasp_config == c)[0]), arrays["contact"][key[k]]))
-        order = pick_configs(np.array([int(f[0].object_id[f[1]]) for f in found]), per_task)
-        picks += [(attrs["task"], *found[k]) for k in order]
+                    found.append((sh, int(c), int(np.flatnonzero(sh.grasp_config == c)[0]), k))
+        order = pick_configs(np.array([f[3][0] for f in found]), per_task)
+        picks += [(task, *found[k]) for k in order]
     if not picks:
         raise ValueError("no test configuration has both ground-truth grasps and predictions")
-    cols = 1 + samples
-    fig = plt.figure(figsize=(2.6 * cols, 2.6 * len(picks)))
-    for r, (task, sh, c, g, pred) in enumerate(picks):
+    cols = 1 + samples * len(methods)
+    fig = plt.figure(figsize=(2.3 * cols, 2.5 * len(picks)))
+    for r, (task, sh, c, g, k) in enumerate(picks):
         pts = sh.points[c]
         name = sh.attrs["objects"][int(sh.object_id[c])]
-        maps = [("ground truth", sh.contact[g])] + [(f"predicted {k + 1}", pred[k]) for k in range(min(samples, len(pred)))]
+        maps: list[tuple[str, np.ndarray | None]] = [("ground truth", sh.contact[g])]
+        for m in methods:
+            arrays, key = stores[task].get(m, (None, {}))
+            pred = arrays["contact"][key[k]] if k in key else None
+            maps += [(f"{labels.get(m, m)} {j + 1}", None if pred is None or j >= len(pred) else pred[j])
+                     for j in range(samples)]
         for j, (label, values) in enumerate(maps):
             ax = fig.add_subplot(len(picks), cols, r * cols + j + 1, projection="3d")
             ax.view_init(25, -60)
-            ax.scatter(*pts.T, s=4, c=values, cmap="inferno", vmin=0, vmax=1)
-            set_equal(ax, pts, pad=0.1)
+            if values is None:
+                ax.set_axis_off()
+                ax.text2D(0.5, 0.5, "not predicted", ha="center", transform=ax.transAxes, fontsize=7)
+            else:
+                ax.scatter(*pts.T, s=4, c=values, cmap="inferno", vmin=0, vmax=1)
+                set_equal(ax, pts, pad=0.1)
             ax.set_title(f"{task}: {name} #{int(sh.config_index[c])}\n{label}" if j == 0 else label, fontsize=8)
-    fig.suptitle("Contact maps of test configurations: ground truth | ContactDiffuser samples (1 = touching)", fontsize=9)
+    shown = " | ".join(labels.get(m, m) for m in methods)
+    fig.suptitle(f"Contact maps of test configurations: ground truth | {shown} (samples; 1 = touching)", fontsize=9)
     fig.tight_layout(rect=(0, 0, 1, 0.97))
     save_figure(fig, out_png)
-    log.info("wrote %s (%d configurations)", out_png, len(picks))
+    log.info("wrote %s (%d configurations, %d methods)", out_png, len(picks), len(methods))

@@ -213,7 +213,7 @@ COMPONENT_NAME, METHOD_NAME, TABLE_NAME = _names(COMPONENTS), _names(METHODS), _
 
 def used_methods():
     """The methods a table or the figures use, in first-use order: only these are predicted."""
-    names = [m for t in TABLES.values() for m in t["rows"]] + [config["figures"]["method"], *config["figures"]["methods"]]
+    names = [m for t in TABLES.values() for m in t["rows"]] + [*config["figures"]["contact_methods"], *config["figures"]["methods"]]
     out = []
     for m in names:  # with the methods they are of (kind filtered), first
         chain = [m]

@@ -77,13 +77,14 @@ rule predictions_figure:
 rule contact_maps_figure:
     input:
         predictions=expand("results/predictions/{task}/{method}.zarr", task=config["scenes"]["tasks"],
-                           method=config["figures"]["method"]),
+                           method=config["figures"]["contact_methods"]),
         shards=all_test_shards,
     output:
         report("results/figures/contact_maps.png", caption="../report/contact_maps.rst", category="Evaluation"),
     params:
         code=code("contact_maps_figure.py"),
         configs=setting("figures", "prediction_configs"),
+        labels=lambda w: {m: METHODS[m]["label"] for m in config["figures"]["contact_methods"]},
     conda:
         "../envs/tohgs.yaml"
     log:

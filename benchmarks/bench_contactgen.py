@@ -1,0 +1,90 @@
+"""Benchmark of ContactGen at test time: seconds per grasp (the sequential CVAE's sample of the contact, part
+and direction maps, then the two-stage solver, :mod:`tohgs.grasps.contactgen_solver`).
+
+Self-contained: the CVAE is built at the config's default sizes (the schema's; the cost does not depend on
+the weights) and the object is a synthetic capsule cloud of ``--points`` points (the default maps' 512),
+S = ``--samples`` grasps solved as one batch (the paper's 16), the solver's steps the schema's defaults
+unless ``--global-steps`` / ``--pose-steps`` are given (ContactGen's 200 + 1000), on the CPU with one
+thread and, where there is one, on CUDA. Writes ``benchmarks/results/contactgen.json`` (or ``--out``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+import trimesh
+
+from tohgs.config import validate_config
+from tohgs.data.batch import Batch
+from tohgs.geometry.maps import sample_surface
+from tohgs.grasps.contactgen_solver import SolverSettings, solve
+from tohgs.hand import load_hand
+from tohgs.models.component import build_component
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def run(device: torch.device, args, cfg: dict) -> dict:
+    hand = load_hand("anny").to(device)
+    model = build_component("contact_gen", cfg["components"]["contact_gen"]["network"]).to(device).eval()
+    pts, nrm = sample_surface(trimesh.creation.capsule(height=0.08, radius=0.03), args.points, np.random.default_rng(0))
+    p = torch.as_tensor(pts, dtype=torch.float32, device=device)[None].expand(args.samples, -1, -1)
+    n = torch.as_tensor(nrm, dtype=torch.float32, device=device)[None].expand(args.samples, -1, -1)
+    zeros = torch.zeros(p.shape[:2], device=device)
+    batch = Batch(points=p, normals=n, d_init=zeros, d_goal=zeros, scene=p, scene_normals=n,
+                  goal_transform=torch.eye(4, device=device).expand(args.samples, 4, 4))
+    solver = {**cfg["prediction"]["contactgen"]}
+    if args.global_steps is not None:
+        solver["global_steps"] = args.global_steps
+    if args.pose_steps is not None:
+        solver["pose_steps"] = args.pose_steps
+    settings = SolverSettings(**solver)
+    gen = torch.Generator().manual_seed(0)
+    timings = []
+    for rep in range(args.repeats + 1):
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        t0 = time.perf_counter()
+        target = model.sample_representation(batch, gen)
+        solve(hand, batch.points, target, settings)
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        if rep:  # the first run warms up
+            timings.append(time.perf_counter() - t0)
+    per_grasp = float(np.median(timings)) / args.samples
+    steps = settings.global_steps + settings.pose_steps
+    return {"global_steps": settings.global_steps, "pose_steps": settings.pose_steps,
+            "seconds_per_grasp": round(per_grasp, 5), "seconds_per_step_per_grasp": round(per_grasp / max(1, steps), 7),
+            "seconds_per_configuration": round(per_grasp * args.samples, 4)}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--points", type=int, default=512)
+    ap.add_argument("--samples", type=int, default=16)
+    ap.add_argument("--global-steps", type=int, default=None)
+    ap.add_argument("--pose-steps", type=int, default=None)
+    ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "contactgen.json"))
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    cfg = validate_config({})
+    out = {"benchmark": "contactgen", "machine": platform.processor() or platform.machine(), "threads": 1,
+           "points": args.points, "samples_per_config": args.samples, "unit": "seconds", "devices": {}}
+    devices = [torch.device("cpu")] + ([torch.device("cuda")] if torch.cuda.is_available() else [])
+    for dev in devices:
+        name = dev.type if dev.type == "cpu" else torch.cuda.get_device_name(0)
+        out["devices"][name] = run(dev, args, cfg)
+        print(name, out["devices"][name], flush=True)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()

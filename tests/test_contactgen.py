@@ -1,0 +1,144 @@
+"""ContactGen's object-centric representation: contact, part and direction maps of a known hand pose."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from scipy.spatial.transform import Rotation
+
+from tohgs.geometry.contact_parts import N_PARTS, directions_to_world, part_contact
+from tohgs.geometry.hand_object import contact_values
+from tohgs.hand import load_hand
+
+
+@pytest.fixture(scope="module")
+def hand():
+    return load_hand("anny")
+
+
+def _posed(hand, seed: int = 0) -> tuple[torch.Tensor, object]:
+    """A grasping pose (the ``power`` preset) turned and moved at random, and the posed hand."""
+    rng = np.random.default_rng(seed)
+    pose = hand.preset("power").clone()
+    pose[0, 3:6] = torch.as_tensor(Rotation.random(random_state=seed).as_rotvec(), dtype=pose.dtype)
+    pose[0, :3] = torch.as_tensor(rng.uniform(-0.2, 0.2, 3), dtype=pose.dtype)
+    return pose, hand(pose)
+
+
+def test_the_part_and_direction_of_rigidly_skinned_vertices_are_recovered_exactly(hand):
+    """Object points on the hand's rigidly skinned vertices (one joint's weight above 0.999): the part is
+    that joint, and the direction is the vertex's rest offset from the joint, whatever the pose: the
+    posed frames (the forward pass's rotations) are checked against the rest geometry, not against
+    themselves."""
+    weights, labels = hand.weights, hand.part_labels
+    rigid = torch.nonzero(weights.max(-1).values > 0.999)[:, 0]
+    parts_present = set(labels[rigid].tolist())
+    assert len(parts_present) >= 10, f"only {len(parts_present)} parts have rigid vertices"
+    expected = hand.rest_vertices[rigid] - hand.rest_joints[labels[rigid]]
+    expected = expected / expected.norm(dim=-1, keepdim=True)
+    for seed in range(3):
+        _, out = _posed(hand, seed)
+        points = out.vertices[:, rigid]  # (1, R, 3) object points exactly on those vertices
+        rep = part_contact(points, out.vertices, out.joints, out.rotations, labels, alpha=100.0)
+        assert torch.equal(rep.part[0], labels[rigid]), "each point's part is its vertex's joint"
+        err = (rep.direction[0] - expected).norm(dim=-1)
+        assert float(err.max()) < 1e-4, f"seed {seed}: direction error up to {float(err.max()):.2e}"
+        assert float(rep.contact.min()) > 0.999, "a point on the hand is in full contact"
+
+
+def test_directions_go_back_to_the_world_and_the_contact_is_the_shards_map(hand):
+    torch.manual_seed(0)
+    _, out = _posed(hand, 5)
+    centre = out.vertices[0].mean(0)
+    points = centre + 0.06 * torch.randn(1, 300, 3)
+    rep = part_contact(points, out.vertices, out.joints, out.rotations, hand.part_labels, alpha=100.0)
+    assert rep.part.min() >= 0 and rep.part.max() < N_PARTS
+    assert torch.allclose(rep.direction.norm(dim=-1), torch.ones(1, 300), atol=1e-5)
+    world = directions_to_world(rep.part, rep.direction, out.rotations)
+    origin = out.joints[0, rep.part[0]]
+    offset = points[0] - origin
+    assert float((world[0] - offset / offset.norm(dim=-1, keepdim=True)).norm(dim=-1).max()) < 1e-4
+    expected, _ = contact_values(points, out.vertices, 100.0)
+    assert torch.allclose(rep.contact, expected)
+    near = rep.contact > 0.5
+    assert 0 < int(near.sum()) < 300, "some points near the hand, some away"
+    with pytest.raises(ValueError, match="rotations must have shape"):
+        part_contact(points, out.vertices, out.joints, out.rotations[:, :15], hand.part_labels, 100.0)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# The sequential CVAE (ContactGen) and its contact-only reduction (ContactCVAE) learn their targets.
+
+from tests.test_grasptta import _prepared, _train  # noqa: E402
+from tests.test_maps import built  # noqa: E402, F401  (the module-scoped fixture)
+from tohgs.data.batch import Batch  # noqa: E402
+
+CONTACT_GEN = {"latent": 8, "hidden": [32, 32], "kl_anneal_steps": 50,
+               "pointnet": {"sa": [[64, 0.03, 16, [32, 32]], [0, 0.0, 0, [64]]], "fp": [[64], [32]]}}
+
+
+@pytest.mark.parametrize("parts", [True, False])
+def test_a_trained_contact_gen_reconstructs_its_targets_better_than_an_untrained_one(built, parts):  # noqa: F811
+    tmp, hand, _, _, _ = built
+    net = {**CONTACT_GEN, "parts": parts}
+    fresh, data = _prepared("contact_gen", net, tmp / "shard-0.zarr", hand)
+    trained, _ = _prepared("contact_gen", net, tmp / "shard-0.zarr", hand)
+    _train(trained, data, 80)
+    batch = Batch.collate([data.item(i, 0) for i in range(len(data))])
+    truth = trained.targets(batch) if parts else None
+    w = 1.0 + 5.0 * batch.contact
+
+    def errors(model):
+        rep = model.eval().reconstruct(batch)
+        out = {"contact": float((w * (rep.contact - batch.contact).abs()).mean())}
+        if parts:
+            out["part"] = float((w * (rep.part != truth.part)).mean())
+            out["direction"] = float((w * (1 - (rep.direction * truth.direction).sum(-1))).mean())
+        return out
+
+    e_fresh, e_trained = errors(fresh), errors(trained)
+    for k in e_fresh:
+        assert e_trained[k] < 0.5 * e_fresh[k], (k, e_trained, e_fresh)
+    gen = torch.Generator().manual_seed(0)
+    maps = trained.sample_contact(batch, "ddim", 1, gen)
+    assert maps.shape == batch.contact.shape and float(maps.min()) >= 0 and float(maps.max()) <= 1
+    if parts:
+        rep = trained.sample_representation(batch, gen)
+        assert rep.part.shape == batch.contact.shape and int(rep.part.max()) < N_PARTS
+        assert torch.allclose(rep.direction.norm(dim=-1), torch.ones_like(batch.contact), atol=1e-5)
+        # the sampled map puts contact where the training maps have it: on the cube's top, under the hand
+        top = batch.points[..., 2] > batch.points[..., 2].max() - 0.01
+        assert float(maps[top].mean()) > float(maps[~top].mean()) + 0.1
+
+
+# ---------------------------------------------------------------------------------------------------------
+# The solver brings a perturbed ground-truth hand back toward the representation it made.
+
+from tohgs.grasps.contactgen_solver import SolverSettings, default_start, representation_of, solve  # noqa: E402
+from tohgs.models.contact_net import perturb_grasps  # noqa: E402
+from tohgs.data.maps import MapDataset  # noqa: E402
+
+
+def test_the_solver_brings_a_perturbed_hand_back_to_its_representation(built):  # noqa: F811
+    tmp, hand, _, _, _ = built
+    data = MapDataset([tmp / "shard-0.zarr"], per="grasp")
+    batch = Batch.collate([data.item(i, 0) for i in range(len(data))])
+    alpha = float(data.shards[0].attrs.get("alpha_contact", 100.0))
+    target = representation_of(hand, batch.grasp, batch.points, alpha)
+    start = perturb_grasps(batch.grasp, (0.015, 0.15, 0.15), torch.Generator().manual_seed(3))
+    settings = SolverSettings(global_steps=40, pose_steps=120)
+    grasp, history = solve(hand, batch.points, target, settings, start=start)
+    with torch.no_grad():
+        true_v = hand(batch.grasp).vertices
+        err_start = (hand(start).vertices - true_v).norm(dim=-1).mean().item()
+        err_end = (hand(grasp).vertices - true_v).norm(dim=-1).mean().item()
+    e_start = history["energy"][settings.global_steps]  # the first pose-stage energy (every term)
+    assert history["energy"][-1] < 0.5 * e_start, (history["energy"][-1], e_start)
+    assert err_end < 0.6 * err_start, (err_end, err_start)
+    lim = hand.joint_limits.reshape(45, 2)
+    assert ((grasp[:, 6:] >= lim[:, 0] - 1e-6) & (grasp[:, 6:] <= lim[:, 1] + 1e-6)).all()
+    # from the default start too, the contact energy falls (the global stage finds the contact side)
+    _, hist = solve(hand, batch.points, target, SolverSettings(global_steps=60, pose_steps=0))
+    assert hist["contact"][-1] < 0.7 * hist["contact"][0]
+    assert default_start(hand, 2).shape == (2, 51)

@@ -1,0 +1,169 @@
+"""ContactGen's grasp solver (Liu et al. ICCV 2023): the hand that realises an object-centric contact
+representation (:mod:`tohgs.geometry.contact_parts`), by gradient descent on the grasp numbers.
+
+Per hand (each of the B problems has its own energy, so that they are solved together and independently):
+
+- ``E_contact = w_contact sum_i c_i |s_i|``: ``s_i`` the signed distance of object point ``i`` to its
+  assigned hand part, ``c_i`` its contact value. ContactGen evaluates a learned per-part SDF of MANO; the
+  proxy here is the distance to the nearest vertex of the assigned part (the sign does not enter this
+  term). Only the points with ``c_i >= min_contact`` enter (the others weigh almost nothing and would cost
+  a search over the hand each);
+- ``E_direction = w_direction sum_i (1 + c_i) (1 - cos(u_i, u*_i))``: ``u_i`` the point's direction in its
+  part's frame for the current hand, ``u*_i`` the representation's;
+- ``E_penetration = w_penetration sum_i max(depth_i - 1 mm, 0)``: object points inside the hand (behind
+  their nearest vertex's outward normal), by their depth (ContactGen: the part SDFs below -1 mm);
+- ``E_pose = w_pose sum_k ((theta_k - mu_k) / sigma_k)^2`` over the 45 finger numbers, about the hand's
+  pose prior (ContactGen regularises MANO's PCA coefficients, which are about the mean pose).
+
+The point sums are scaled to ContactGen's 2048 points. Two stages with Adam (ContactGen's schedule):
+``global_steps`` on the global rotation and translation only, with the contact and direction terms; then
+``pose_steps`` on all 51 numbers with every term, the finger numbers clamped to the joint limits after
+each step. The start, unless given: the pose prior's mean, no global rotation, the palm's contact
+vertices centred on the object (ContactGen starts MANO at its origin, which its objects are centred on).
+ContactGen runs 200 + 1000 steps; those are settings (the laptop default is smaller).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from tohgs.geometry.contact_parts import PartContact, part_contact
+from tohgs.geometry.hand_object import inside_hand, vertex_normals
+from tohgs.grasps.tta import clamp_to_limits
+from tohgs.hand.model import HandModel
+
+CONTACTGEN_POINTS = 2048  # ContactGen's object points: the point sums are scaled to this many
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """The two stages and the weights (module docstring). ContactGen: 200 + 1000 steps, lr 5e-2 then
+    5e-3, weights contact 0.1, penetration 3, direction 0.01, pose 0.01."""
+
+    global_steps: int = 100
+    pose_steps: int = 300
+    global_lr: float = 5e-2
+    pose_lr: float = 5e-3
+    w_contact: float = 0.1
+    w_direction: float = 0.01
+    w_penetration: float = 3.0
+    w_pose: float = 0.01
+    min_contact: float = 0.1
+    max_contact_points: int = 256  # at most this many (the highest) contact points per hand enter E_contact
+
+    def __post_init__(self):
+        if self.global_steps < 0 or self.pose_steps < 0:
+            raise ValueError("solver steps must be non-negative")
+
+
+def part_distance(points: torch.Tensor, part: torch.Tensor, vertices: torch.Tensor, part_labels: torch.Tensor
+                  ) -> torch.Tensor:
+    """(B, K) distance (m) of (B, K, 3) points to the nearest of the (B, V, 3) hand vertices whose (V,)
+    label is the point's (B, K) part (found without gradient; differentiable in the hand)."""
+    with torch.no_grad():
+        d = torch.cdist(points, vertices)  # (B, K, V)
+        d = d.masked_fill(part_labels[None, None, :] != part[..., None], float("inf"))
+        idx = d.argmin(-1)
+    near = torch.gather(vertices, 1, idx[..., None].expand(-1, -1, 3))
+    return ((points - near) ** 2).sum(-1).add(1e-12).sqrt()
+
+
+def default_start(hand: HandModel, batch: int) -> torch.Tensor:
+    """(B, 51) the start grasps (module docstring): prior-mean fingers, no rotation, the palm's contact
+    vertices centred on the origin (the object's centroid in the network frame)."""
+    g = torch.zeros(1, 51, dtype=hand.rest_vertices.dtype, device=hand.rest_vertices.device)
+    g[0, 6:] = torch.as_tensor(hand.assets.prior_mean, dtype=g.dtype, device=g.device)
+    with torch.no_grad():
+        palm = hand(g).vertices[0, hand.contact_ids].mean(0)
+    g[0, :3] = -palm
+    return g.expand(batch, -1).clone()
+
+
+def solver_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, target: PartContact,
+                  settings: SolverSettings, stage: str, contact_sel: tuple[torch.Tensor, torch.Tensor]
+                  ) -> dict[str, torch.Tensor]:
+    """The weighted terms (B,) and their sum ``"energy"`` of (B, 51) grasps for the (B, N, 3) points'
+    ``target`` representation; ``stage`` ``global`` (contact, direction) or ``pose`` (every term);
+    ``contact_sel`` the (B, K) indices of the contact points and their (B, K) weights (0 for padding)."""
+    s = settings
+    scale = CONTACTGEN_POINTS / points.shape[1]
+    out = hand(grasp)
+    idx, weight = contact_sel
+    sel_points = torch.gather(points, 1, idx[..., None].expand(-1, -1, 3))
+    sel_part = torch.gather(target.part, 1, idx)
+    d_part = part_distance(sel_points, sel_part, out.vertices, hand.part_labels)
+    terms = {"contact": s.w_contact * scale * (weight * d_part).sum(-1)}
+    # the current directions of every point in its target part's frame (the nearest-vertex part and the
+    # contact of part_contact are not used here: the parts are the target's)
+    origin = torch.gather(out.joints[:, :16], 1, target.part[..., None].expand(-1, -1, 3))
+    rot = torch.gather(out.rotations, 1, target.part[..., None, None].expand(-1, -1, 3, 3))
+    local = (rot.transpose(-1, -2) @ (points - origin)[..., None])[..., 0]
+    cos = (local * target.direction).sum(-1) / local.norm(dim=-1).clamp_min(1e-9)
+    terms["direction"] = s.w_direction * scale * ((1 + target.contact) * (1 - cos)).sum(-1)
+    if stage == "pose":
+        inside, offset = inside_hand(points, out.vertices, vertex_normals(out.vertices, hand.closed_faces))
+        depth = offset.norm(dim=-1)
+        terms["penetration"] = s.w_penetration * scale * (inside * (depth - 1e-3).clamp_min(0)).sum(-1)
+        mu = torch.as_tensor(hand.assets.prior_mean, dtype=grasp.dtype, device=grasp.device)
+        sigma = torch.as_tensor(hand.assets.prior_std, dtype=grasp.dtype, device=grasp.device).clamp_min(1e-3)
+        terms["pose"] = s.w_pose * (((grasp[:, 6:] - mu) / sigma) ** 2).sum(-1)
+    return {**terms, "energy": sum(terms.values())}
+
+
+def contact_points(contact: torch.Tensor, settings: SolverSettings) -> tuple[torch.Tensor, torch.Tensor]:
+    """(B, K) the indices of each map's highest contact values (K = ``max_contact_points`` or fewer) and
+    their weights, 0 below ``min_contact``."""
+    k = min(settings.max_contact_points, contact.shape[1])
+    values, idx = contact.topk(k, dim=-1)
+    return idx, torch.where(values >= settings.min_contact, values, torch.zeros_like(values))
+
+
+def solve(hand: HandModel, points: torch.Tensor, target: PartContact, settings: SolverSettings,
+          start: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, list[float]]]:
+    """The (B, 51) grasps realising the (B, N) representation ``target`` on (B, N, 3) points (network
+    frame, m), from ``start`` (B, 51) or :func:`default_start`; and the history of the mean energy and its
+    terms per step (stage ``global`` then ``pose``; the last entry after the last step)."""
+    if target.part is None or target.direction is None:
+        raise ValueError("the solver needs a representation with parts and directions (ContactGen with parts)")
+    b = points.shape[0]
+    g0 = default_start(hand, b) if start is None else start.detach().to(points)
+    g0 = clamp_to_limits(g0, hand.joint_limits)
+    sel = contact_points(target.contact, settings)
+    glob = g0[:, :6].clone().requires_grad_(True)
+    fingers = g0[:, 6:].clone()
+    history: dict[str, list[float]] = {}
+
+    def record(terms):
+        for k, v in terms.items():
+            history.setdefault(k, []).append(float(v.detach().mean()))
+
+    with torch.enable_grad():
+        opt = torch.optim.Adam([glob], lr=settings.global_lr)
+        for _ in range(settings.global_steps):
+            terms = solver_energy(hand, torch.cat([glob, fingers], -1), points, target, settings, "global", sel)
+            record(terms)
+            opt.zero_grad(set_to_none=True)
+            terms["energy"].sum().backward()
+            opt.step()
+        fingers.requires_grad_(True)
+        opt = torch.optim.Adam([glob, fingers], lr=settings.pose_lr)
+        for _ in range(settings.pose_steps):
+            terms = solver_energy(hand, torch.cat([glob, fingers], -1), points, target, settings, "pose", sel)
+            record(terms)
+            opt.zero_grad(set_to_none=True)
+            terms["energy"].sum().backward()
+            opt.step()
+            with torch.no_grad():
+                fingers.copy_(clamp_to_limits(torch.cat([glob, fingers], -1), hand.joint_limits)[:, 6:])
+        grasp = torch.cat([glob, fingers], -1).detach()
+        record(solver_energy(hand, grasp, points, target, settings, "pose", sel))
+    return grasp, history
+
+
+def representation_of(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, alpha: float) -> PartContact:
+    """The representation (B, N) that (B, 51) hands make on (B, N, 3) points (the ground truth's)."""
+    with torch.no_grad():
+        out = hand(grasp)
+        return part_contact(points, out.vertices, out.joints, out.rotations, hand.part_labels, alpha)
