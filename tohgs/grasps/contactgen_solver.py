@@ -139,24 +139,22 @@ def solve(hand: HandModel, points: torch.Tensor, target: PartContact, settings: 
         for k, v in terms.items():
             history.setdefault(k, []).append(float(v.detach().mean()))
 
+    def descend(params: list[torch.Tensor], lr: float, steps: int, stage: str) -> None:
+        opt = torch.optim.Adam(params, lr=lr)
+        for _ in range(steps):
+            terms = solver_energy(hand, torch.cat([glob, fingers], -1), points, target, settings, stage, sel)
+            record(terms)
+            opt.zero_grad(set_to_none=True)
+            terms["energy"].sum().backward()
+            opt.step()
+            if stage == "pose":  # the finger numbers back within the joint limits
+                with torch.no_grad():
+                    fingers.copy_(clamp_to_limits(torch.cat([glob, fingers], -1), hand.joint_limits)[:, 6:])
+
     with torch.enable_grad():
-        opt = torch.optim.Adam([glob], lr=settings.global_lr)
-        for _ in range(settings.global_steps):
-            terms = solver_energy(hand, torch.cat([glob, fingers], -1), points, target, settings, "global", sel)
-            record(terms)
-            opt.zero_grad(set_to_none=True)
-            terms["energy"].sum().backward()
-            opt.step()
+        descend([glob], settings.global_lr, settings.global_steps, "global")
         fingers.requires_grad_(True)
-        opt = torch.optim.Adam([glob, fingers], lr=settings.pose_lr)
-        for _ in range(settings.pose_steps):
-            terms = solver_energy(hand, torch.cat([glob, fingers], -1), points, target, settings, "pose", sel)
-            record(terms)
-            opt.zero_grad(set_to_none=True)
-            terms["energy"].sum().backward()
-            opt.step()
-            with torch.no_grad():
-                fingers.copy_(clamp_to_limits(torch.cat([glob, fingers], -1), hand.joint_limits)[:, 6:])
+        descend([glob, fingers], settings.pose_lr, settings.pose_steps, "pose")
         grasp = torch.cat([glob, fingers], -1).detach()
         record(solver_energy(hand, grasp, points, target, settings, "pose", sel))
     return grasp, history
