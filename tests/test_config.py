@@ -113,7 +113,7 @@ def test_a_config_adds_methods_and_tables_to_the_built_in_ones_and_fills_their_d
                            "tables": {"samplers": {"rows": ["ours", "ours-ddpm"]}},
                            "components": {"grasp_diffuser": {"kind": "grasp_diffuser", "network": {"d_model": 32}}}})
     assert set(cfg["methods"]) == {"dataset", "ours", "ours-gt-contact", "grasptta", "f-grasptta", "m-grasptta-ta",
-                                   "m-grasptta-gt", "contactgen", "cc-gd", "ours-ddpm"}
+                                   "m-grasptta-gt", "m-grasptta-oc", "contactgen", "cc-gd", "ours-ddpm"}
     assert set(cfg["tables"]) == {"table1", "table2", "table4", "table5", "samplers"}
     assert cfg["tables"]["samplers"]["columns"][-1] == "discarded" and cfg["tables"]["samplers"]["pending"] == []
     gd = cfg["components"]["grasp_diffuser"]
