@@ -62,6 +62,7 @@ from torch import nn
 from tohgs.data.batch import Batch
 from tohgs.geometry.grasp import GRASP_DIM
 from tohgs.geometry.hand_object import contact_values, inside_hand, vertex_normals
+from tohgs.geometry.rot6d import grasp_from_palm_rot6d, palm_rot6d
 from tohgs.hand.model import HandModel
 from tohgs.hand.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from tohgs.models.component import Component, seen_grasps
@@ -335,21 +336,13 @@ class GraspDiffuser(Component):
         """(B, 51) grasps -> (B, D) vectors of the representation (unnormalised)."""
         if self.cfg.representation == "axis_angle":
             return grasp
-        rot = axis_angle_to_matrix(grasp[:, 3:6])
-        palm = grasp[:, :3] + self.wrist + (rot @ (self.palm - self.wrist)[:, None])[..., 0]
-        return torch.cat([palm, rot[..., 0], rot[..., 1], grasp[:, 6:]], -1)
+        return palm_rot6d(grasp, self.wrist, self.palm)
 
     def grasp_of(self, vec: torch.Tensor) -> torch.Tensor:
         """The inverse of :meth:`vector_of` (any 6D vector is projected onto a rotation, Gram-Schmidt)."""
         if self.cfg.representation == "axis_angle":
             return vec
-        a, b = vec[:, 3:6], vec[:, 6:9]
-        x = a / a.norm(dim=-1, keepdim=True).clamp_min(1e-8)
-        y = b - (x * b).sum(-1, keepdim=True) * x
-        y = y / y.norm(dim=-1, keepdim=True).clamp_min(1e-8)
-        rot = torch.stack([x, y, torch.cross(x, y, dim=-1)], -1)
-        trans = vec[:, :3] - self.wrist - (rot @ (self.palm - self.wrist)[:, None])[..., 0]
-        return torch.cat([trans, matrix_to_axis_angle(rot), vec[:, 9:]], -1)
+        return grasp_from_palm_rot6d(vec, self.wrist, self.palm)
 
     def normalise(self, g: torch.Tensor) -> torch.Tensor:
         return (g - self.grasp_mean) / self.grasp_std
