@@ -142,3 +142,35 @@ def test_the_solver_brings_a_perturbed_hand_back_to_its_representation(built):  
     _, hist = solve(hand, batch.points, target, SolverSettings(global_steps=60, pose_steps=0))
     assert hist["contact"][-1] < 0.7 * hist["contact"][0]
     assert default_start(hand, 2).shape == (2, 51)
+
+
+def test_the_part_search_finds_the_nearest_vertex_of_the_assigned_part(hand):
+    """The padded per-part search against the brute-force masked minimum over every vertex."""
+    from tohgs.grasps.contactgen_solver import nearest_part_vertex, part_table
+
+    _, out = _posed(hand, seed=4)
+    verts = out.vertices.expand(3, -1, -1)
+    gen = torch.Generator().manual_seed(0)
+    points = verts[:, :1].detach() + 0.05 * torch.randn(3, 200, 3, generator=gen)
+    part = torch.randint(0, N_PARTS, (3, 200), generator=gen)
+    idx = nearest_part_vertex(points, part, verts, part_table(hand.part_labels))
+    d = torch.cdist(points, verts).masked_fill(hand.part_labels[None, None] != part[..., None], float("inf"))
+    assert torch.equal(hand.part_labels[idx], part)
+    assert torch.allclose(torch.gather(d, 2, idx[..., None])[..., 0], d.min(-1).values)
+
+
+def test_kept_correspondences_solve_as_well_as_searching_every_step(built):  # noqa: F811
+    """``search_every`` 10 (the default) ends within 15 % of the exact search's energy, from the same start."""
+    tmp, hand, _, _, _ = built
+    data = MapDataset([tmp / "shard-0.zarr"], per="grasp")
+    batch = Batch.collate([data.item(i, 0) for i in range(len(data))])
+    target = representation_of(hand, batch.grasp, batch.points, 100.0)
+    start = perturb_grasps(batch.grasp, (0.015, 0.15, 0.15), torch.Generator().manual_seed(3))
+    ends = {}
+    for every in (1, 10):
+        _, hist = solve(hand, batch.points, target, SolverSettings(global_steps=20, pose_steps=60, search_every=every),
+                        start=start)
+        ends[every] = hist["energy"][-1]
+    assert ends[10] < 1.15 * ends[1], ends
+    with pytest.raises(ValueError, match="search_every"):
+        SolverSettings(search_every=0)

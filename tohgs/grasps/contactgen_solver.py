@@ -15,6 +15,12 @@ Per hand (each of the B problems has its own energy, so that they are solved tog
 - ``E_pose = w_pose sum_k ((theta_k - mu_k) / sigma_k)^2`` over the 45 finger numbers, about the hand's
   pose prior (ContactGen regularises MANO's PCA coefficients, which are about the mean pose).
 
+The nearest hand vertices (of the assigned part, for ``E_contact``; of the whole hand, for
+``E_penetration``) are searched without gradient every ``search_every`` steps and kept in between, as ICP
+keeps its correspondences; the distances to them are recomputed, with gradient, every step (1 searches every
+step: the exact nearest vertex). The part search looks only at the assigned part's vertices (a (16, P)
+table of each part's vertices, padded), not at the whole hand.
+
 The point sums are scaled to ContactGen's 2048 points. Two stages with Adam (ContactGen's schedule):
 ``global_steps`` on the global rotation and translation only, with the contact and direction terms; then
 ``pose_steps`` on all 51 numbers with every term, the finger numbers clamped to the joint limits after
@@ -29,8 +35,8 @@ from dataclasses import dataclass
 
 import torch
 
-from tohgs.geometry.contact_parts import PartContact, part_contact
-from tohgs.geometry.hand_object import inside_hand, vertex_normals
+from tohgs.geometry.contact_parts import N_PARTS, PartContact, part_contact
+from tohgs.geometry.hand_object import nearest_index, vertex_normals
 from tohgs.grasps.tta import clamp_to_limits
 from tohgs.hand.model import HandModel
 
@@ -52,20 +58,39 @@ class SolverSettings:
     w_pose: float = 0.01
     min_contact: float = 0.1
     max_contact_points: int = 256  # at most this many (the highest) contact points per hand enter E_contact
+    search_every: int = 10  # steps between searches of the nearest hand vertices (1: every step)
 
     def __post_init__(self):
         if self.global_steps < 0 or self.pose_steps < 0:
             raise ValueError("solver steps must be non-negative")
+        if self.search_every < 1:
+            raise ValueError(f"search_every must be at least 1, got {self.search_every}")
 
 
-def part_distance(points: torch.Tensor, part: torch.Tensor, vertices: torch.Tensor, part_labels: torch.Tensor
-                  ) -> torch.Tensor:
-    """(B, K) distance (m) of (B, K, 3) points to the nearest of the (B, V, 3) hand vertices whose (V,)
-    label is the point's (B, K) part (found without gradient; differentiable in the hand)."""
+def part_table(part_labels: torch.Tensor, n_parts: int = N_PARTS) -> torch.Tensor:
+    """(n_parts, P) the vertex indices of each part of (V,) ``part_labels``, P the largest part's size; a
+    smaller part is padded with its own first vertex (a repeat never changes which vertex is nearest)."""
+    members = [torch.nonzero(part_labels == p).flatten() for p in range(n_parts)]
+    if any(len(m) == 0 for m in members):
+        raise ValueError("every hand part needs at least one vertex")
+    size = max(len(m) for m in members)
+    return torch.stack([torch.cat([m, m[:1].expand(size - len(m))]) for m in members])
+
+
+def nearest_part_vertex(points: torch.Tensor, part: torch.Tensor, vertices: torch.Tensor, table: torch.Tensor
+                        ) -> torch.Tensor:
+    """(B, K) the index of the nearest of the (B, V, 3) hand vertices whose part is the (B, K) ``part`` of
+    each of (B, K, 3) points, among that part's vertices only (``table``: :func:`part_table`); no
+    gradient."""
     with torch.no_grad():
-        d = torch.cdist(points, vertices)  # (B, K, V)
-        d = d.masked_fill(part_labels[None, None, :] != part[..., None], float("inf"))
-        idx = d.argmin(-1)
+        cand = table[part]  # (B, K, P)
+        d = torch.gather(torch.cdist(points, vertices), 2, cand)  # the full matrix is one GEMM; cheaper than gathering P vertices per point
+        return torch.gather(cand, 2, d.argmin(-1, keepdim=True))[..., 0]
+
+
+def distance_to(points: torch.Tensor, vertices: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
+    """(B, K) distance (m) of (B, K, 3) points to the (B, K) indexed ones of (B, V, 3) vertices,
+    differentiable in both."""
     near = torch.gather(vertices, 1, idx[..., None].expand(-1, -1, 3))
     return ((points - near) ** 2).sum(-1).add(1e-12).sqrt()
 
@@ -82,18 +107,28 @@ def default_start(hand: HandModel, batch: int) -> torch.Tensor:
 
 
 def solver_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, target: PartContact,
-                  settings: SolverSettings, stage: str, contact_sel: tuple[torch.Tensor, torch.Tensor]
-                  ) -> dict[str, torch.Tensor]:
+                  settings: SolverSettings, stage: str, contact_sel: tuple[torch.Tensor, torch.Tensor],
+                  nearest: dict | None = None, search: bool = True) -> dict[str, torch.Tensor]:
     """The weighted terms (B,) and their sum ``"energy"`` of (B, 51) grasps for the (B, N, 3) points'
     ``target`` representation; ``stage`` ``global`` (contact, direction) or ``pose`` (every term);
-    ``contact_sel`` the (B, K) indices of the contact points and their (B, K) weights (0 for padding)."""
+    ``contact_sel`` the (B, K) indices of the contact points and their (B, K) weights (0 for padding).
+
+    ``nearest`` keeps the nearest-vertex indices between calls (``part``: (B, K) of the contact points in
+    their parts; ``hand``: (B, N) of every point in the hand, with ``normal`` (B, N, 3) that vertex's
+    outward normal when it was found): they are searched when ``search`` is true or not yet there, and
+    reused otherwise (module docstring)."""
     s = settings
+    nearest = {} if nearest is None else nearest
     scale = CONTACTGEN_POINTS / points.shape[1]
     out = hand(grasp)
     idx, weight = contact_sel
     sel_points = torch.gather(points, 1, idx[..., None].expand(-1, -1, 3))
-    sel_part = torch.gather(target.part, 1, idx)
-    d_part = part_distance(sel_points, sel_part, out.vertices, hand.part_labels)
+    if search or "part" not in nearest:
+        if "table" not in nearest:
+            nearest["table"] = part_table(hand.part_labels)
+        sel_part = torch.gather(target.part, 1, idx)
+        nearest["part"] = nearest_part_vertex(sel_points, sel_part, out.vertices, nearest["table"])
+    d_part = distance_to(sel_points, out.vertices, nearest["part"])
     terms = {"contact": s.w_contact * scale * (weight * d_part).sum(-1)}
     # the current directions of every point in its target part's frame (the nearest-vertex part and the
     # contact of part_contact are not used here: the parts are the target's)
@@ -103,7 +138,14 @@ def solver_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, ta
     cos = (local * target.direction).sum(-1) / local.norm(dim=-1).clamp_min(1e-9)
     terms["direction"] = s.w_direction * scale * ((1 + target.contact) * (1 - cos)).sum(-1)
     if stage == "pose":
-        inside, offset = inside_hand(points, out.vertices, vertex_normals(out.vertices, hand.closed_faces))
+        if search or "hand" not in nearest:
+            nearest["hand"] = idx_h = nearest_index(points, out.vertices)
+            with torch.no_grad():  # the normals only decide which points are inside: kept with the index
+                normals = vertex_normals(out.vertices.detach(), hand.closed_faces)
+                nearest["normal"] = torch.gather(normals, 1, idx_h[..., None].expand(-1, -1, 3))
+        near = torch.gather(out.vertices, 1, nearest["hand"][..., None].expand(-1, -1, 3))
+        offset = points - near
+        inside = ((offset * nearest["normal"]).sum(-1) < 0).float()
         depth = offset.norm(dim=-1)
         terms["penetration"] = s.w_penetration * scale * (inside * (depth - 1e-3).clamp_min(0)).sum(-1)
         mu = torch.as_tensor(hand.assets.prior_mean, dtype=grasp.dtype, device=grasp.device)
@@ -139,10 +181,13 @@ def solve(hand: HandModel, points: torch.Tensor, target: PartContact, settings: 
         for k, v in terms.items():
             history.setdefault(k, []).append(float(v.detach().mean()))
 
+    nearest: dict = {}  # the nearest-vertex indices, kept between searches
+
     def descend(params: list[torch.Tensor], lr: float, steps: int, stage: str) -> None:
         opt = torch.optim.Adam(params, lr=lr)
-        for _ in range(steps):
-            terms = solver_energy(hand, torch.cat([glob, fingers], -1), points, target, settings, stage, sel)
+        for step in range(steps):
+            terms = solver_energy(hand, torch.cat([glob, fingers], -1), points, target, settings, stage, sel,
+                                  nearest, search=step % settings.search_every == 0)
             record(terms)
             opt.zero_grad(set_to_none=True)
             terms["energy"].sum().backward()
@@ -156,7 +201,7 @@ def solve(hand: HandModel, points: torch.Tensor, target: PartContact, settings: 
         fingers.requires_grad_(True)
         descend([glob, fingers], settings.pose_lr, settings.pose_steps, "pose")
         grasp = torch.cat([glob, fingers], -1).detach()
-        record(solver_energy(hand, grasp, points, target, settings, "pose", sel))
+        record(solver_energy(hand, grasp, points, target, settings, "pose", sel, nearest))
     return grasp, history
 
 
