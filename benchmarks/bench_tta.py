@@ -48,7 +48,7 @@ def run(device: torch.device, args, cfg: dict) -> dict:
     pts, nrm = sample_surface(mesh, args.points, np.random.default_rng(0))
     batch = _batch(pts, nrm, args.samples, device)
     gen = torch.Generator().manual_seed(0)
-    settings = TTASettings(steps=args.steps)
+    settings = TTASettings(steps=args.steps, search_every=args.search_every)
     timings = []
     for rep in range(args.repeats + 1):
         if device.type == "cuda":
@@ -71,6 +71,7 @@ def main() -> None:
     ap.add_argument("--samples", type=int, default=16)
     ap.add_argument("--steps", type=int, default=300)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--search-every", type=int, default=TTASettings.search_every)
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "tta.json"))
     args = ap.parse_args()
     torch.set_num_threads(1)

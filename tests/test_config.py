@@ -113,7 +113,7 @@ def test_a_config_adds_methods_and_tables_to_the_built_in_ones_and_fills_their_d
                            "tables": {"samplers": {"rows": ["ours", "ours-ddpm"]}},
                            "components": {"grasp_diffuser": {"kind": "grasp_diffuser", "network": {"d_model": 32}}}})
     assert set(cfg["methods"]) == {"dataset", "ours", "ours-gt-contact", "grasptta", "f-grasptta", "m-grasptta-ta",
-                                   "m-grasptta-gt", "m-grasptta-oc", "contactgen", "cc-gd", "ours-ddpm"}
+                                   "m-grasptta-gt", "m-grasptta-oc", "contactgen", "cc-gd", "scenediffuser", "flex", "ours-ddpm"}
     assert set(cfg["tables"]) == {"table1", "table2", "table4", "table5", "samplers"}
     assert cfg["tables"]["samplers"]["columns"][-1] == "discarded" and cfg["tables"]["samplers"]["pending"] == []
     gd = cfg["components"]["grasp_diffuser"]
@@ -136,12 +136,15 @@ def test_the_settings_dataclasses_default_to_the_schema():
     from tohgs.models.grasp_cvae import GraspCVAEConfig
     from tohgs.models.contact_gen import ContactGenConfig
     from tohgs.grasps.contactgen_solver import SolverSettings
+    from tohgs.grasps.flex import FlexSettings
+    from tohgs.metrics.bootstrap import BootstrapSettings
+    from tohgs.models.pose_prior import PosePriorConfig
     from tohgs.models.train import TrainSettings
 
     cfg = validate_config({})
     schema = load_schema()
     networks = {}
-    for kind in ("contact_diffuser", "grasp_diffuser", "grasp_cvae", "contact_net", "contact_gen"):
+    for kind in ("contact_diffuser", "grasp_diffuser", "grasp_cvae", "contact_net", "contact_gen", "pose_prior"):
         networks[kind] = {}
         from tohgs.config import _fill_defaults
 
@@ -151,7 +154,9 @@ def test_the_settings_dataclasses_default_to_the_schema():
              (FilterSettings, pred["filter"]), (ICPSettings, pred["filter"]["icp"]),
              (ContactDiffuserConfig, networks["contact_diffuser"]), (GraspDiffuserConfig, networks["grasp_diffuser"]),
              (GraspCVAEConfig, networks["grasp_cvae"]), (ContactNetConfig, networks["contact_net"]),
-             (ContactGenConfig, networks["contact_gen"]), (SolverSettings, pred["contactgen"])]
+             (ContactGenConfig, networks["contact_gen"]), (SolverSettings, pred["contactgen"]),
+             (FlexSettings, pred["flex"]), (PosePriorConfig, networks["pose_prior"]),
+             (BootstrapSettings, cfg["evaluation"]["bootstrap"])]
     for cls, block in pairs:
         for f in dataclasses.fields(cls):
             value = getattr(cls(), f.name)

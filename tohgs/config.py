@@ -196,10 +196,21 @@ def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -
                 raise ConfigError(f"config key 'methods.{name}.of': a cycle of methods ({' -> '.join([*seen, base])})")
             seen.append(base)
             m = base
+    if "claims" in cfg["tables"]:
+        raise ConfigError("config key 'tables.claims': the name is the claims table's (results/tables/claims.csv); "
+                          "name the table otherwise")
     for name, table in cfg["tables"].items():
         for m in table["rows"]:
             if m not in cfg["methods"]:
                 raise ConfigError(f"config key 'tables.{name}.rows': {m!r} is not a method (methods: "
+                                  f"{', '.join(sorted(cfg['methods']))})")
+    for name, claim in cfg.get("claims", {}).items():
+        if claim["table"] not in cfg["tables"]:
+            raise ConfigError(f"config key 'claims.{name}.table': {claim['table']!r} is not a table (tables: "
+                              f"{', '.join(sorted(cfg['tables']))})")
+        for m in [claim["better"], *claim["than"], *claim["exclude"]]:
+            if m not in cfg["methods"]:
+                raise ConfigError(f"config key 'claims.{name}': {m!r} is not a method (methods: "
                                   f"{', '.join(sorted(cfg['methods']))})")
     for key in ("methods", "contact_methods"):
         for m in cfg["figures"][key]:

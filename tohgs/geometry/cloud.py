@@ -36,3 +36,43 @@ def penetration_fraction(query: torch.Tensor, cloud: torch.Tensor, normals: torc
                          ) -> torch.Tensor:
     """(B,) the fraction of each hand's (B, V, 3) vertices inside the cloud's surface (OPP from a cloud)."""
     return inside_cloud(query, cloud, normals, max_depth).float().mean(-1)
+
+
+class CloudIndex:
+    """Nearest-point search in one fixed cloud (an object's or a scene's) for many queries: one k-d tree,
+    built once, on the CPU; the full distance matrix on other devices. The optimisations that keep a hand
+    out of a cloud ask it every few steps.
+
+    Args:
+        cloud: (M, 3) points, m.
+        normals: (M, 3) their unit outward normals.
+    """
+
+    def __init__(self, cloud: torch.Tensor, normals: torch.Tensor):
+        if cloud.ndim != 2 or cloud.shape[-1] != 3 or normals.shape != cloud.shape or len(cloud) == 0:
+            raise ValueError(f"a cloud index needs (M >= 1, 3) points and normals, got {tuple(cloud.shape)} and "
+                             f"{tuple(normals.shape)}")
+        self.cloud, self.normals = cloud, normals
+        self._tree = None
+        if cloud.device.type == "cpu":
+            from scipy.spatial import cKDTree
+
+            self._tree = cKDTree(cloud.detach().numpy())
+
+    def nearest(self, query: torch.Tensor) -> torch.Tensor:
+        """(...,) the index of the nearest cloud point to each of (..., 3) query points (no gradient)."""
+        with torch.no_grad():
+            if self._tree is not None:
+                q = query.detach().reshape(-1, 3).numpy()
+                return torch.as_tensor(self._tree.query(q, k=1)[1], dtype=torch.long).reshape(query.shape[:-1])
+            flat = query.detach().reshape(-1, 3)
+            return torch.cat([torch.cdist(c, self.cloud).argmin(-1) for c in flat.split(65536)]).reshape(query.shape[:-1])
+
+    def signed_distance(self, query: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
+        """(...,) point-to-plane signed distance (m) of (..., 3) queries at their (...,) nearest points
+        ``idx`` (:meth:`nearest`); differentiable in the query."""
+        return ((query - self.cloud[idx]) * self.normals[idx]).sum(-1)
+
+    def distance(self, query: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
+        """(...,) Euclidean distance (m) of (..., 3) queries to their nearest points ``idx``."""
+        return ((query - self.cloud[idx]) ** 2).sum(-1).add(1e-12).sqrt()

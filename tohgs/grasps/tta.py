@@ -18,6 +18,12 @@ independent; the official code generated one grasp at a time):
 The point sums are scaled to the official 3000 points. Optimiser: SGD with momentum (the official lr
 6.25e-6, momentum 0.8, 300 steps; all settings, the laptop default 100 steps). After every step the finger numbers are clamped to the
 hand's joint limits (the official MANO PCA space needed no clamp; our 45 axis-angle numbers do).
+
+The nearest hand vertex of each object point (for the contact map and the inside test) is searched without
+gradient every ``search_every`` steps and kept in between, as ContactGen's solver keeps its correspondences
+(:mod:`tohgs.grasps.contactgen_solver`); the distances to the kept vertices are recomputed, with gradient,
+every step. The search was half of a step's time (a k-d tree per hand); with the small steps of the
+adaptation the nearest vertex rarely changes between searches. 1 searches every step (exact).
 """
 
 from __future__ import annotations
@@ -43,6 +49,13 @@ class TTASettings:
     w_consistency: float = 1.0
     w_penetration: float = 7.0
     contact_radius: float = 0.02
+    search_every: int = 5  # steps between searches of the nearest hand vertices (1: every step, exact)
+
+    def __post_init__(self):
+        if self.steps < 0:
+            raise ValueError(f"TTA steps must be non-negative, got {self.steps}")
+        if self.search_every < 1:
+            raise ValueError(f"search_every must be at least 1, got {self.search_every}")
 
 
 def clamp_to_limits(grasp: torch.Tensor, limits: torch.Tensor) -> torch.Tensor:
@@ -52,13 +65,23 @@ def clamp_to_limits(grasp: torch.Tensor, limits: torch.Tensor) -> torch.Tensor:
 
 
 def tta_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_net, alpha: float,
-               settings: TTASettings, object_features=None) -> dict[str, torch.Tensor]:
+               settings: TTASettings, object_features=None, nearest: torch.Tensor | None = None
+               ) -> dict[str, torch.Tensor]:
     """The three weighted terms and their sum ``"energy"``, each (B,), of (B, 51) grasps on (B, N, 3)
     object points; ``contact_net`` is a :class:`tohgs.models.contact_net.ContactNet` (its
-    ``object_features`` of the points may be given: they do not change while the hands move)."""
+    ``object_features`` of the points may be given: they do not change while the hands move).
+
+    ``nearest``: (B, N) each point's kept nearest hand vertex (module docstring); searched when not given.
+    The returned dict holds the one used under ``"nearest"``, without gradient."""
     scale = OFFICIAL_POINTS / points.shape[1]
     verts = hand(grasp).vertices
-    c_hand, idx = contact_values(points, verts, alpha)
+    if nearest is None:
+        c_hand, idx = contact_values(points, verts, alpha)
+    else:
+        idx = nearest
+        near = torch.gather(verts, 1, idx[..., None].expand(-1, -1, 3))
+        d = ((points - near) ** 2).sum(-1).add(1e-12).sqrt()
+        c_hand = 1.0 - 2.0 * (torch.sigmoid(alpha * d) - 0.5)
     with torch.no_grad():
         c_target = contact_net.predict_map(points, verts, c_hand.detach(), object_features)
     consistency = 1e-4 * scale * ((c_hand - c_target) ** 2).sum(-1)
@@ -70,7 +93,7 @@ def tta_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, conta
     contact = 7500.0 * (close * d_candidates**2).sum(-1) / close.sum(-1).clamp_min(1.0)
     terms = {"contact": settings.w_contact * contact, "consistency": settings.w_consistency * consistency,
              "penetration": settings.w_penetration * penetration}
-    return {**terms, "energy": terms["contact"] + terms["consistency"] + terms["penetration"]}
+    return {**terms, "energy": terms["contact"] + terms["consistency"] + terms["penetration"], "nearest": idx.detach()}
 
 
 def adapt(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_net, alpha: float,
@@ -79,16 +102,20 @@ def adapt(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_ne
 
     Returns:
         The adapted (B, 51) grasps (finger numbers within the joint limits) and the history of the mean
-        energy and its terms (one value per step, before the step; the last after the last step).
+        energy and its terms (one value per step, before the step, with the vertices kept at that step;
+        the last after the last step, searched afresh).
     """
     g = clamp_to_limits(grasp.detach().clone(), hand.joint_limits).requires_grad_(True)
     opt = torch.optim.SGD([g], lr=settings.lr, momentum=settings.momentum)
     history: dict[str, list[float]] = {}
     with torch.no_grad():
         features = contact_net.object_features(points)
+    nearest = None
     with torch.enable_grad():
         for step in range(settings.steps + 1):
-            terms = tta_energy(hand, g, points, contact_net, alpha, settings, features)
+            search = step % settings.search_every == 0 or step == settings.steps
+            terms = tta_energy(hand, g, points, contact_net, alpha, settings, features, None if search else nearest)
+            nearest = terms.pop("nearest")
             for k, v in terms.items():
                 history.setdefault(k, []).append(float(v.detach().mean()))
             if step == settings.steps:

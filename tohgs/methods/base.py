@@ -17,8 +17,9 @@ class PredictSettings:
     """``samples`` S per configuration (the paper's 16); sampler ``ddpm`` (all T steps) or ``ddim`` with
     ``steps`` steps; ``seed``; ``device``; GraspDiffuser's classifier-free ``guidance`` scale;
     ``contact_smoothing``, the neighbours over which ContactDiffuser's maps are averaged (0: none); ``tta``,
-    ``filter`` and ``contactgen``: GraspTTA's adaptation, F-GraspTTA's filter and ContactGen's solver
-    (:mod:`tohgs.methods.grasp_tta`, :mod:`tohgs.methods.filtered`, :mod:`tohgs.methods.contact_gen`). A
+    ``filter``, ``contactgen`` and ``flex``: GraspTTA's adaptation, F-GraspTTA's filter, ContactGen's solver
+    and FLEX's optimisation (:mod:`tohgs.methods.grasp_tta`, :mod:`tohgs.methods.filtered`,
+    :mod:`tohgs.methods.contact_gen`, :mod:`tohgs.methods.flex`). A
     method's ``settings`` block overlays the config's ``prediction`` block (the two sub-blocks key by key)."""
 
     samples: int = 16
@@ -32,6 +33,7 @@ class PredictSettings:
     tta: dict = field(default_factory=dict)  # tohgs.grasps.tta.TTASettings
     filter: dict = field(default_factory=dict)  # tohgs.methods.filtered.FilterSettings
     contactgen: dict = field(default_factory=dict)  # tohgs.grasps.contactgen_solver.SolverSettings
+    flex: dict = field(default_factory=dict)  # tohgs.grasps.flex.FlexSettings
 
 
 @dataclass

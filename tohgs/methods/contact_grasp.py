@@ -1,10 +1,12 @@
 """Kind ``contact_grasp`` (paper section 4.4): a contact source, then a grasp generator on its maps.
 
-Keys of the method block: ``contact``, a contact component (``sample_contact``: ContactDiffuser, ...) or
-``ground_truth`` (the configuration's own task-grasp maps, cycled to S: the paper's GT-contact rows), and
-``grasp``, a grasp component (``sample_grasps``: GraspDiffuser, ...). Per test configuration: S contact
-maps, one grasp per map. A component's maps may be smoothed (``settings.contact_smoothing``: each value
-the mean over its k nearest points); ground-truth maps never are.
+Keys of the method block: ``contact``, a contact component (``sample_contact``: ContactDiffuser, ...),
+``ground_truth`` (the configuration's own task-grasp maps, cycled to S: the paper's GT-contact rows) or
+``none`` (a generator that reads the object alone: SceneDiffuser), and ``grasp``, a grasp component
+(``sample_grasps``: GraspDiffuser, ...). Per test configuration: S contact maps, one grasp per map. A
+component's maps may be smoothed (``settings.contact_smoothing``: each value the mean over its k nearest
+points); ground-truth maps never are. Without maps, the stored maps are those the sampled hands make on
+the object (the map shards' contact map, at their ``alpha_contact``).
 """
 
 from __future__ import annotations
@@ -14,9 +16,11 @@ import time
 import numpy as np
 import torch
 
+from tohgs.geometry.hand_object import contact_values
 from tohgs.methods.base import Method, Prediction, gt_rows
 
 GROUND_TRUTH = "ground_truth"
+NO_CONTACT = "none"
 
 
 def smooth_contact(points: torch.Tensor, contact: torch.Tensor, k: int) -> torch.Tensor:
@@ -42,12 +46,26 @@ class ContactGrasp(Method):
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self.contact_model = None if self.cfg["contact"] == GROUND_TRUTH else self.model("contact")
+        src = self.cfg["contact"]
+        self.contact_model = None if src in (GROUND_TRUTH, NO_CONTACT) else self.model("contact")
         self.grasp_model = self.model("grasp")
+        reads_maps = getattr(getattr(self.grasp_model, "cfg", None), "contact_input", True)
+        if src == NO_CONTACT and reads_maps:
+            raise ValueError(f"method {self.name!r}: contact none, but its grasp model {self.cfg['grasp']!r} reads "
+                             "contact maps (a grasp_diffuser with contact_input: false reads the object alone)")
+        if src == NO_CONTACT and self.hand is None:
+            raise ValueError(f"method {self.name!r}: without maps the stored maps are the hands'; the job needs the hand model")
 
     def predict(self, batch, shard, row, generator, rng) -> Prediction | None:
         s = self.settings
         t0 = time.perf_counter()
+        if self.cfg["contact"] == NO_CONTACT:
+            grasp = self.grasp_model.sample_grasps(batch, s.sampler, s.steps, generator, s.guidance)
+            t1 = time.perf_counter()
+            with torch.no_grad():
+                contact, _ = contact_values(batch.points, self.hand(grasp).vertices, float(shard.attrs.get("alpha_contact", 100.0)))
+            return Prediction(contact.cpu().numpy().astype(np.float32), grasp.cpu().numpy().astype(np.float64),
+                              {"grasp": t1 - t0, "contact_map": time.perf_counter() - t1})
         if self.contact_model is not None:
             contact = self.contact_model.sample_contact(batch, s.sampler, s.steps, generator)
             contact = smooth_contact(batch.points[0], contact, s.contact_smoothing)

@@ -25,9 +25,7 @@ import torch
 from tohgs.config import settings_from
 from tohgs.grasps.tta import TTASettings, adapt
 from tohgs.methods.base import Method, Prediction, gt_rows
-from tohgs.methods.contact_grasp import GROUND_TRUTH, smooth_contact
-
-NO_CONTACT = "none"
+from tohgs.methods.contact_grasp import GROUND_TRUTH, NO_CONTACT, smooth_contact
 
 
 class GraspTTA(Method):

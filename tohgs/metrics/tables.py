@@ -24,6 +24,9 @@ discarded      grasps the method discarded (a filter's, F-GraspTTA's): not evalu
 Every metric is of the kept grasps. A method that kept none has every metric 0 with its count of
 discarded grasps, as the paper's F-GraspTTA Stacking row. A table may list ``pending`` rows, methods that
 cannot be built yet, with the reason: they appear with empty cells (NaN) and the reason in the markdown.
+
+With a bootstrap (:mod:`tohgs.metrics.bootstrap`), each metric column ``c`` but the counts gets its
+interval as ``c_lo`` and ``c_hi`` in the frame (the CSV); the markdown writes ``value ± half-width``.
 """
 
 from __future__ import annotations
@@ -33,6 +36,9 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+
+from tohgs.metrics.bootstrap import (INTERVAL_COLUMNS, BootstrapSettings, config_keys, config_stats, intervals,
+                                     resample_weights)
 
 METRIC_COLUMNS = ("pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "init_opp", "goal_opp", "ts", "grasps",
                   "configs", "discarded")
@@ -97,20 +103,36 @@ def read_metrics(paths: list[str | Path]) -> pd.DataFrame:
 
 
 def metric_table(rows: pd.DataFrame, tasks: list[str], methods: list[str], labels: dict[str, str],
-                 columns: list[str], t: QualityThresholds, pending: list[str] = ()) -> pd.DataFrame:
+                 columns: list[str], t: QualityThresholds, pending: list[str] = (),
+                 bootstrap: BootstrapSettings | None = None) -> pd.DataFrame:
     """One row per task and method, in the given orders: ``task``, ``method`` (its label) and ``columns``;
-    then per task a row of NaN for each label of ``pending`` (methods not available yet)."""
+    then per task a row of NaN for each label of ``pending`` (methods not available yet). With a
+    ``bootstrap`` of samples > 0, the intervals ``<c>_lo``, ``<c>_hi`` of the columns that have them; the
+    resamples are drawn once per task, over every configuration of the task's rows, and shared by its
+    methods."""
     unknown = [c for c in columns if c not in METRIC_COLUMNS]
     if unknown:
         raise ValueError(f"unknown table columns {unknown} (known: {', '.join(METRIC_COLUMNS)})")
+    ci = [c for c in columns if c in INTERVAL_COLUMNS] if bootstrap is not None and bootstrap.samples > 0 else []
+    bounds = [f"{c}_{end}" for c in ci for end in ("lo", "hi")]
     out = []
     for task in tasks:
+        in_task = rows[rows.task == task]
+        if ci:
+            keys = config_keys(in_task)
+            rng = np.random.default_rng([bootstrap.seed, tasks.index(task)])
+            weights = resample_weights(keys.object.to_numpy(), bootstrap.samples, rng)
         for m in methods:
-            sel = rows[(rows.task == task) & (rows.method == m)]
+            sel = in_task[in_task.method == m]
             summary = summarize(sel, t)
-            out.append({"task": task, "method": labels.get(m, m), **{c: summary[c] for c in columns}})
-        out += [{"task": task, "method": label, **dict.fromkeys(columns, float("nan"))} for label in pending]
-    return pd.DataFrame(out, columns=["task", "method", *columns])
+            row = {"task": task, "method": labels.get(m, m), **{c: summary[c] for c in columns}}
+            if ci:
+                iv = intervals(weights, config_stats(sel, keys, t.max_pv, t.max_sd), bootstrap.level)
+                for c in ci:
+                    row[f"{c}_lo"], row[f"{c}_hi"] = iv[c]
+            out.append(row)
+        out += [{"task": task, "method": label, **dict.fromkeys([*columns, *bounds], float("nan"))} for label in pending]
+    return pd.DataFrame(out, columns=["task", "method", *columns, *bounds])
 
 
 def qr_grid(rows: pd.DataFrame, tasks: list[str], methods: list[str], labels: dict[str, str], max_pv: list[float],
@@ -128,11 +150,12 @@ def qr_grid(rows: pd.DataFrame, tasks: list[str], methods: list[str], labels: di
 
 
 def markdown(table: pd.DataFrame, digits: int = 3, notes: dict[str, str] | None = None) -> str:
-    """A GitHub markdown table of :func:`metric_table`'s frame (NaN as an en dash); ``notes`` (a method
-    label -> a sentence) are marked on the label and listed below the table."""
+    """A GitHub markdown table of :func:`metric_table`'s frame (NaN as an en dash; a column with an
+    interval as ``value ± half-width``); ``notes`` (a method label -> a sentence) are marked on the label
+    and listed below the table."""
     notes = notes or {}
     marks = {label: "*" * (k + 1) for k, label in enumerate(notes)}
-    cols = list(table.columns)
+    cols = [c for c in table.columns if not (c.endswith(("_lo", "_hi")) and c[:-3] in table.columns)]
     lines = ["| " + " | ".join(_HEADERS.get(c, c) for c in cols) + " |", "|" + "---|" * len(cols)]
     for _, r in table.iterrows():
         cells = []
@@ -141,7 +164,11 @@ def markdown(table: pd.DataFrame, digits: int = 3, notes: dict[str, str] | None 
             if c in ("grasps", "configs", "discarded"):
                 cells.append(str(int(v)) if np.isfinite(v) else "–")
             elif isinstance(v, (float, np.floating)):
-                cells.append("–" if not np.isfinite(v) else f"{v:.{digits}f}" if c in ("ts", "ds") else f"{v:.2f}")
+                fmt = f".{digits}f" if c in ("ts", "ds") else ".2f"
+                text = "–" if not np.isfinite(v) else format(v, fmt)
+                if np.isfinite(v) and f"{c}_lo" in table.columns and np.isfinite(r[f"{c}_lo"]):
+                    text += " ± " + format((r[f"{c}_hi"] - r[f"{c}_lo"]) / 2, fmt)
+                cells.append(text)
             else:
                 cells.append(str(v) + (marks.get(v, "") if c == "method" else ""))
         lines.append("| " + " | ".join(cells) + " |")

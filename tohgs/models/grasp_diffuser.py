@@ -50,6 +50,11 @@ The two point sums are scaled to the paper's 2048 points (``sum x (2048 / N)``),
 mean the same with any number of training points. The clamps act per sample: a batch with one far-off hand
 keeps the gradient of the others (clamping the batch mean, as the official code, zeroed it for whole runs).
 Weights (15, 1, 5, 0.002) for Placing and Shelving, (10, 1, 3, 0.005) for Stacking.
+
+With ``contact_input`` false the network reads the object alone (xyz and normals, no contact channel, the
+network frame, no contact moments): SceneDiffuser's object-only grasp diffusion (Huang et al. CVPR 2023, as
+the paper re-implements it: the same auxiliary losses, which still compare the predicted hand with the true
+hand's map at training time, and no optimisation at inference). It samples grasps without a map.
 """
 
 from __future__ import annotations
@@ -99,6 +104,7 @@ class GraspDiffuserConfig:
     representation: str = "palm_rot6d"  # or "axis_angle": the 51 numbers (the paper's)
     contact_features: bool = True  # the contact region's moments added to the pooled condition
     cond_dropout: float = 0.0  # training: the share of samples whose context is replaced by a learnt null
+    contact_input: bool = True  # false: the object alone is the condition (SceneDiffuser)
     mlp: tuple = (64, 128)
     pointnet: dict = field(default_factory=lambda: {
         "sa": [[128, 0.02, 16, [32, 32, 64]], [32, 0.05, 16, [64, 64, 128]], [0, 0.0, 0, [128, 256]]],
@@ -114,6 +120,9 @@ class GraspDiffuserConfig:
             raise ValueError(f"GraspDiffuser representation must be one of {REPRESENTATIONS}, not {self.representation!r}")
         if self.encoder not in ENCODERS:
             raise ValueError(f"GraspDiffuser encoder must be one of {ENCODERS}, not {self.encoder!r}")
+        if not self.contact_input and (self.frame != "network" or self.contact_features):
+            raise ValueError("a GraspDiffuser without contact_input reads no map: it needs frame 'network' and "
+                             "contact_features false")
         if self.d_model % self.n_heads:
             raise ValueError(f"GraspDiffuser d_model {self.d_model} is not a multiple of n_heads {self.n_heads}")
 
@@ -242,14 +251,15 @@ class GraspDiffuser(Component):
         self.diffusion = DiffusionConfig(**cfg.diffusion)
         self.schedule = NoiseSchedule(self.diffusion)
         self._training = {}  # what prepare() sets for the loss: the hand (not a submodule), weights, alpha
+        channels = 4 if cfg.contact_input else 3  # normals (3) and the contact value
         if cfg.encoder == "pointnet2":
-            self.backbone = PointNet2(PointNet2Config.from_dict({**cfg.pointnet, "in_channels": 4}))
+            self.backbone = PointNet2(PointNet2Config.from_dict({**cfg.pointnet, "in_channels": channels}))
         else:
-            self.backbone = PointNet(4, list(cfg.mlp))
+            self.backbone = PointNet(channels, list(cfg.mlp))
         d = cfg.d_model
         self.cond = nn.Sequential(nn.Linear(self.backbone.global_dim, d), nn.SiLU(), nn.Linear(d, d))
         tokens = cfg.context == "tokens"
-        self.token_proj = (nn.Sequential(nn.Linear(self.backbone.local_dim + 4, d), nn.SiLU(), nn.Linear(d, d))
+        self.token_proj = (nn.Sequential(nn.Linear(self.backbone.local_dim + channels, d), nn.SiLU(), nn.Linear(d, d))
                            if tokens else None)
         self.time = TimeMLP(d)
         self.dim = GRASP_DIM if cfg.representation == "axis_angle" else GRASP_DIM + 3
@@ -317,9 +327,9 @@ class GraspDiffuser(Component):
     @torch.no_grad()
     def sample_grasps(self, batch: Batch, sampler: str, steps: int, generator: torch.Generator,
                       guidance: float = 1.0) -> torch.Tensor:
-        """(B, 51) grasps in the network frame for the batch's objects and contact maps (``batch.contact``),
-        with classifier-free ``guidance`` (1: none)."""
-        if batch.contact is None:
+        """(B, 51) grasps in the network frame for the batch's objects and contact maps (``batch.contact``;
+        none without ``contact_input``), with classifier-free ``guidance`` (1: none)."""
+        if batch.contact is None and self.cfg.contact_input:
             raise ValueError("GraspDiffuser samples grasps for contact maps; the batch has none")
         cond = self.condition(batch.points, batch.normals, batch.contact)
         x0 = sample(lambda xt, tt: self.guided(xt, tt, cond, guidance), (batch.size, self.dim), self.diffusion,
@@ -370,15 +380,17 @@ class GraspDiffuser(Component):
         normaliser measures)."""
         return self._framed_vector(grasp, *self.frame_of(points, contact))
 
-    def condition(self, points: torch.Tensor, normals: torch.Tensor, contact: torch.Tensor) -> GraspCondition:
-        """The condition of (B, N, 3) points with (B, N, 3) normals and their (B, N) contact map."""
+    def condition(self, points: torch.Tensor, normals: torch.Tensor, contact: torch.Tensor | None) -> GraspCondition:
+        """The condition of (B, N, 3) points with (B, N, 3) normals and their (B, N) contact map (not read,
+        and may be None, without ``contact_input``)."""
         rot, origin = self.frame_of(points, contact)
         points = (points - origin[:, None]) @ rot  # x' = R^T (x - o), as row vectors
         normals = normals @ rot
-        local, glob = self.backbone(points, torch.cat([normals, contact[..., None]], -1))
+        extra = [contact[..., None]] if self.cfg.contact_input else []
+        local, glob = self.backbone(points, torch.cat([normals, *extra], -1))
         tokens = None
         if self.token_proj is not None:
-            tokens = self.token_proj(torch.cat([local, points, contact[..., None]], -1))
+            tokens = self.token_proj(torch.cat([local, points, *extra], -1))
         c = self.cond(glob)
         if self.features is not None:
             c = c + self.features(contact_moments(points, normals, contact, self.cfg.contact_power))

@@ -317,6 +317,21 @@ def table_metrics(wildcards):
             for m in TABLES[wildcards.table]["rows"]]
 
 
+def claims_methods():
+    """The methods the claims compare: the rows of the tables they name."""
+    return sorted({m for c in config["claims"].values() for m in TABLES[c["table"]]["rows"]})
+
+
+def claims_metrics(wildcards):
+    """Every task's metric file of every method the claims compare."""
+    return [f"results/metrics/{task}/{m}.parquet" for task in config["scenes"]["tasks"] for m in claims_methods()]
+
+
+def claims_outputs():
+    """The claims table, where the config has claims."""
+    return ["results/tables/claims.csv"] if config["claims"] else []
+
+
 def final_outputs():
     """The default target's outputs known before the catalog exists (see catalog_outputs)."""
     tasks = config["scenes"]["tasks"]
@@ -330,7 +345,7 @@ def final_outputs():
         "results/maps/summary.csv",
         "results/figures/maps.png",
         "results/figures/contact_maps.png",
-    ] + [f"results/tables/{t}.csv" for t in TABLES] + prediction_outputs() + [
+    ] + [f"results/tables/{t}.csv" for t in TABLES] + claims_outputs() + prediction_outputs() + [
         f"results/models/{task}/checks.json" for task in tasks if checked_components()] + [
         f"results/figures/{kind}_{task}.png" for task in tasks for kind in ("scenes", "predictions")]
 

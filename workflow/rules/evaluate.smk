@@ -44,12 +44,35 @@ rule table:
         columns=lambda w: setting("tables", w.table, "columns"),
         qr=setting("evaluation", "qr"),
         qr_grid=setting("evaluation", "qr_grid"),
+        bootstrap=setting("evaluation", "bootstrap"),
     conda:
         "../envs/tohgs.yaml"
     log:
         "logs/tables/{table}.log",
     script:
         "../scripts/table.py"
+
+
+rule claims:
+    input:
+        metrics=claims_metrics,
+    output:
+        csv=report("results/tables/claims.csv", caption="../report/claims.rst", category="Tables"),
+        md="results/tables/claims.md",
+    params:
+        code=code("claims.py"),
+        tasks=setting("scenes", "tasks"),
+        claims=setting("claims"),
+        tables=lambda w: {name: {"rows": t["rows"]} for name, t in sorted(TABLES.items())},
+        labels=lambda w: {m: METHODS[m]["label"] for m in claims_methods()},
+        qr=setting("evaluation", "qr"),
+        bootstrap=setting("evaluation", "bootstrap"),
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/tables/claims.log",
+    script:
+        "../scripts/claims.py"
 
 
 rule predictions_figure:

@@ -1,0 +1,104 @@
+"""The tables' confidence intervals: a hierarchical bootstrap over objects and their configurations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tohgs.metrics.bootstrap import BootstrapSettings, cells, config_keys, config_stats, intervals, resample_weights
+from tohgs.metrics.tables import METRIC_COLUMNS, QualityThresholds, markdown, metric_table, summarize
+
+T = QualityThresholds()
+
+
+def _rows(rng: np.random.Generator, objects: int = 20, configs: int = 6, grasps: int = 8, mean: float = 0.6,
+          spread: float = 0.15, method: str = "m") -> pd.DataFrame:
+    """Grasp rows whose quality is Bernoulli with a per-object and a per-configuration random effect about
+    ``mean`` (so QR's expectation is ``mean`` x 100 and grasps of one object are correlated)."""
+    p_obj = np.clip(mean + spread * rng.standard_normal(objects), 0.02, 0.98)
+    p = np.clip(p_obj[:, None] + 0.05 * rng.standard_normal((objects, configs)), 0, 1)  # (O, C)
+    good = (rng.random((objects, configs, grasps)) < p[..., None]).ravel()
+    n = good.size
+    o, c, g = np.meshgrid(np.arange(objects), np.arange(configs), np.arange(grasps), indexing="ij")
+    ds = np.repeat(rng.uniform(0.05, 0.1, objects * configs), grasps)
+    return pd.DataFrame({
+        "task": "placing", "method": method, "object": np.char.add("o", o.ravel().astype(str)),
+        "config_index": c.ravel(), "sample": g.ravel(), "pv": np.where(good, 1e-6, 5e-6) * rng.uniform(0.5, 1.0, n),
+        "sd": np.where(good, 0.01, 0.05), "contact_distance": 0.0, "init_opp": rng.uniform(0, 0.02, n),
+        "goal_opp": rng.uniform(0, 0.02, n), "ds": ds, "hand_vertices": 1609, "kept": True})
+
+
+def test_the_cells_of_unit_weights_are_the_tables_values():
+    rows = _rows(np.random.default_rng(0), objects=4)
+    rows.loc[rows.index[:5], "kept"] = False
+    keys = config_keys(rows)
+    values = cells(np.ones((1, len(keys))), config_stats(rows, keys, T.max_pv, T.max_sd))
+    expect = summarize(rows, T)
+    for k, v in values.items():
+        assert v[0] == pytest.approx(expect[k], rel=1e-9, abs=1e-12), k
+
+
+def test_the_interval_covers_a_known_mean_at_the_stated_rate():
+    """95 % intervals of QR over 150 synthetic test sets of 20 objects: the true mean inside in 88-99 %."""
+    rng = np.random.default_rng(1)
+    hits = 0
+    trials = 150
+    for _ in range(trials):
+        rows = _rows(rng, mean=0.6)
+        keys = config_keys(rows)
+        w = resample_weights(keys.object.to_numpy(), 300, rng)
+        lo, hi = intervals(w, config_stats(rows, keys, T.max_pv, T.max_sd), 0.95)["qr"]
+        hits += lo <= 60.0 <= hi
+    assert 0.88 <= hits / trials <= 0.99, hits / trials
+
+
+def test_resampling_draws_objects_then_their_configurations():
+    objects = np.array(["a", "a", "a", "b", "c", "c"])
+    w = resample_weights(objects, 500, np.random.default_rng(0))
+    assert w.shape == (500, 6) and np.all(w.sum(1) > 0)
+    # every resample draws 3 objects; an object drawn k times brings k x its size in configurations
+    sizes = {"a": 3, "b": 1, "c": 2}
+    for row in w[:50]:
+        drawn = {o: row[objects == o].sum() / sizes[o] for o in sizes}
+        assert sum(drawn.values()) == pytest.approx(3) and all(float(v).is_integer() for v in drawn.values())
+
+
+def test_tables_carry_intervals_and_the_markdown_shows_them():
+    rows = pd.concat([_rows(np.random.default_rng(2), objects=5, method="a"),
+                      _rows(np.random.default_rng(3), objects=5, method="b", mean=0.3)], ignore_index=True)
+    cols = ["qr", "ts", "grasps"]
+    table = metric_table(rows, ["placing"], ["a", "b"], {"a": "A", "b": "B"}, cols, T,
+                         bootstrap=BootstrapSettings(samples=200))
+    assert list(table.columns) == ["task", "method", *cols, "qr_lo", "qr_hi", "ts_lo", "ts_hi"]
+    for _, r in table.iterrows():
+        assert r.qr_lo <= r.qr <= r.qr_hi and r.qr_hi - r.qr_lo > 1
+    md = markdown(table)
+    assert " ± " in md and "qr_lo" not in md
+    plain = metric_table(rows, ["placing"], ["a"], {}, cols, T, bootstrap=BootstrapSettings(samples=0))
+    assert list(plain.columns) == ["task", "method", *cols]
+    with pytest.raises(ValueError):
+        BootstrapSettings(level=1.5)
+    assert set(cols) <= set(METRIC_COLUMNS)
+
+
+def test_claims_hold_fail_or_cannot_tell_by_their_paired_interval():
+    from tohgs.metrics.claims import claims_markdown, claims_table
+
+    rows = pd.concat([_rows(np.random.default_rng(4), objects=6, method="good", mean=0.8),
+                      _rows(np.random.default_rng(5), objects=6, method="bad", mean=0.3),
+                      _rows(np.random.default_rng(6), objects=6, method="same", mean=0.8)], ignore_index=True)
+    tables = {"t": {"rows": ["good", "bad", "same"]}}
+    claims = {"a": {"table": "t", "better": "good", "than": ["bad"]},
+              "b": {"table": "t", "better": "bad", "than": ["good"]},
+              "c": {"table": "t", "better": "good", "than": ["same"]},
+              "d": {"table": "t", "better": "good", "than": [], "exclude": ["same"], "metric": "init_opp"},
+              "e": {"table": "t", "better": "good", "than": ["other"]}}
+    out = claims_table(rows, claims, tables, {}, T, BootstrapSettings(samples=300), ["placing"]).set_index("claim")
+    assert out.loc["a", "verdict"] == "holds" and out.loc["a", "lo"] > 0
+    assert out.loc["b", "verdict"] == "does not hold" and out.loc["b", "difference"] < 0
+    assert out.loc["c", "verdict"] == "cannot tell" and out.loc["c", "lo"] < 0 < out.loc["c", "hi"]
+    # lower is better for OPP: the difference is the other's minus the method's (here about 0, same generator)
+    assert out.loc["d", "than"] == "bad" and abs(out.loc["d", "difference"]) < 0.5
+    assert out.loc["e", "verdict"].startswith("not checked: other")
+    assert "| a: " in claims_markdown(out.reset_index(), 0.95)

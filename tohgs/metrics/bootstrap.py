@@ -1,0 +1,109 @@
+"""Confidence intervals of the tables' cells: a hierarchical bootstrap over the test set.
+
+A table cell (QR, OPP, TS, PV, SD, ...) is a function of the grasps of one task and method. The test set
+is a few objects with a few configurations each, and grasps of one configuration are not independent, so
+the resampling follows the data's structure: objects with replacement, then, within each drawn object,
+its configurations with replacement (every grasp of a drawn configuration comes along). Each resample
+is a vector of configuration weights (how often each was drawn); every cell is a ratio of weighted sums
+of per-configuration statistics (:func:`config_stats`), so ``B`` resamples are one (B, C) @ (C, k)
+product, not B recomputations. One set of weights, over the task's configurations, serves every method
+of the task, so differences between methods (paired: the same configurations) have intervals too.
+
+The interval is the percentile interval of the resampled values at ``level``; the point is the value
+on the whole test set (what :func:`tohgs.metrics.tables.summarize` gives).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+#: The cells that get intervals (the counts ``grasps``, ``configs`` and ``discarded`` do not).
+INTERVAL_COLUMNS = ("pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "init_opp", "goal_opp", "ts")
+_STATS = ("n", "pv", "pv2", "sd", "sd2", "contact", "quality", "init_opp", "goal_opp", "ds", "has_ds")
+
+
+@dataclass(frozen=True)
+class BootstrapSettings:
+    """``samples`` resamples (0: no intervals), the interval's ``level`` and the resampling ``seed``."""
+
+    samples: int = 1000
+    level: float = 0.95
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.samples < 0 or not 0 < self.level < 1:
+            raise ValueError(f"bootstrap needs samples >= 0 and 0 < level < 1, got {self.samples}, {self.level}")
+
+
+def config_keys(frame: pd.DataFrame) -> pd.DataFrame:
+    """The task's configurations, (object, config_index), sorted: the columns of the weights."""
+    return frame[["object", "config_index"]].drop_duplicates().sort_values(["object", "config_index"]).reset_index(drop=True)
+
+
+def config_stats(frame: pd.DataFrame, keys: pd.DataFrame, max_pv: float, max_sd: float) -> np.ndarray:
+    """(C, 11) per configuration of ``keys``: kept grasps n, the sums of PV, PV^2, SD, SD^2 (SI units), the
+    counts in contact (PV > 0) and of quality (PV < max_pv and SD < max_sd), the sums of the two OPPs
+    (fractions), the configuration's DS and whether it has one (kept grasps)."""
+    if "kept" in frame.columns:
+        frame = frame[frame.kept.astype(bool)]
+    out = np.zeros((len(keys), len(_STATS)))
+    if len(frame) == 0:
+        return out
+    f = frame.assign(pv2=frame.pv**2, sd2=frame.sd**2, contact=(frame.pv > 0).astype(float),
+                     quality=((frame.pv < max_pv) & (frame.sd < max_sd)).astype(float))
+    g = f.groupby(["object", "config_index"])
+    agg = pd.DataFrame({"n": g.size(), "pv": g.pv.sum(), "pv2": g.pv2.sum(), "sd": g.sd.sum(), "sd2": g.sd2.sum(),
+                        "contact": g.contact.sum(), "quality": g.quality.sum(), "init_opp": g.init_opp.sum(),
+                        "goal_opp": g.goal_opp.sum(), "ds": g.ds.first(), "has_ds": 1.0})
+    idx = pd.MultiIndex.from_frame(keys)
+    return agg.reindex(idx).fillna(0.0)[list(_STATS)].to_numpy(dtype=np.float64)
+
+
+def cells(weights: np.ndarray, stats: np.ndarray) -> dict[str, np.ndarray]:
+    """Every interval column (units as the tables': cm^3, cm, %) for (B, C) configuration weights and
+    (C, 11) :func:`config_stats`; (B,) each, NaN where a resample holds no kept grasp."""
+    s = weights @ stats  # (B, 11)
+    col = {k: s[:, i] for i, k in enumerate(_STATS)}
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = np.where(col["n"] > 0, col["n"], np.nan)
+        pv, sd = col["pv"] / n, col["sd"] / n
+        qr = col["quality"] / n
+        init, goal = col["init_opp"] / n, col["goal_opp"] / n
+        return {"pv_avg": pv * 1e6, "pv_std": np.sqrt(np.maximum(col["pv2"] / n - pv**2, 0)) * 1e6,
+                "sd_avg": sd * 100, "sd_std": np.sqrt(np.maximum(col["sd2"] / n - sd**2, 0)) * 100,
+                "cr": col["contact"] / n * 100, "qr": qr * 100,
+                "ds": col["ds"] / np.where(col["has_ds"] > 0, col["has_ds"], np.nan),
+                "init_opp": init * 100, "goal_opp": goal * 100, "ts": qr * (1 - init) * (1 - goal)}
+
+
+def resample_weights(objects: np.ndarray, samples: int, rng: np.random.Generator) -> np.ndarray:
+    """(samples, C) hierarchical bootstrap weights for C configurations of the given (C,) objects: draw as
+    many objects as there are, with replacement; within each drawn object, as many of its configurations
+    as it has, with replacement; a configuration's weight is how often it was drawn."""
+    objects = np.asarray(objects)
+    c = len(objects)
+    _, members = np.unique(objects, return_inverse=True)
+    order = np.argsort(members, kind="stable")  # the configurations grouped by object
+    sizes = np.bincount(members)
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    k = len(sizes)
+    drawn = rng.integers(0, k, (samples, k))  # (B, K) the objects drawn
+    slot = np.arange(sizes.max())  # (M,) the draws within an object, the first sizes[obj] of them real
+    u = rng.random((samples, k, len(slot)))
+    pick = starts[drawn][..., None] + np.floor(u * sizes[drawn][..., None]).astype(np.int64)  # (B, K, M)
+    real = slot[None, None, :] < sizes[drawn][..., None]
+    flat = (np.arange(samples)[:, None, None] * c + order[pick])[real]
+    return np.bincount(flat, minlength=samples * c).reshape(samples, c).astype(np.float64)
+
+
+def intervals(weights: np.ndarray, stats: np.ndarray, level: float) -> dict[str, tuple[float, float]]:
+    """The percentile interval ``(lo, hi)`` at ``level`` of every interval column over the resamples."""
+    tail = (1 - level) / 2 * 100
+    out = {}
+    for k, v in cells(weights, stats).items():
+        v = v[np.isfinite(v)]
+        out[k] = (float(np.percentile(v, tail)), float(np.percentile(v, 100 - tail))) if len(v) else (np.nan, np.nan)
+    return out
