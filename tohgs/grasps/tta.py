@@ -19,11 +19,13 @@ The point sums are scaled to the official 3000 points. Optimiser: SGD with momen
 6.25e-6, momentum 0.8, 300 steps; all settings, the laptop default 100 steps). After every step the finger numbers are clamped to the
 hand's joint limits (the official MANO PCA space needed no clamp; our 45 axis-angle numbers do).
 
-The nearest hand vertex of each object point (for the contact map and the inside test) is searched without
-gradient every ``search_every`` steps and kept in between, as ContactGen's solver keeps its correspondences
-(:mod:`tohgs.grasps.contactgen_solver`); the distances to the kept vertices are recomputed, with gradient,
-every step. The search was half of a step's time (a k-d tree per hand); with the small steps of the
-adaptation the nearest vertex rarely changes between searches. 1 searches every step (exact).
+The nearest hand vertex of each object point (for the contact map and the inside test) can be searched
+without gradient every ``search_every`` steps and kept in between, as ContactGen's solver keeps its
+correspondences (:mod:`tohgs.grasps.contactgen_solver`); the distances to the kept vertices are
+recomputed, with gradient, every step. The default searches every step (exact): keeping them for 5 steps
+made a configuration 1.65x faster at the same end energy, but pushed more hands off the object (a hand
+deep in the object has a large penetration gradient; stale correspondences keep pushing it for up to 5
+steps), and the M-GraspTTA rows lost 10-35 points of QR (docs/baselines.md).
 """
 
 from __future__ import annotations
@@ -49,7 +51,7 @@ class TTASettings:
     w_consistency: float = 1.0
     w_penetration: float = 7.0
     contact_radius: float = 0.02
-    search_every: int = 5  # steps between searches of the nearest hand vertices (1: every step, exact)
+    search_every: int = 1  # steps between searches of the nearest hand vertices (1: every step, exact)
 
     def __post_init__(self):
         if self.steps < 0:

@@ -40,9 +40,9 @@ def pick_configs(object_ids: np.ndarray, n: int) -> list[int]:
     return out
 
 
-def close_camera(target: np.ndarray, task: str, distance: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
-    """Eye and look-at points ``distance`` (m) from a target position: from the open front of a shelf
-    (-y, slightly above) for Shelving, from the front-right and above otherwise."""
+def close_camera(target: np.ndarray, task: str, distance: float = 0.35) -> tuple[np.ndarray, np.ndarray]:
+    """Eye and look-at points ``distance`` (m) from a target position (the look-at point): from the open
+    front of a shelf (-y, slightly above) for Shelving, from the front-right and above otherwise."""
     look = np.asarray(target, dtype=np.float64)
     if task == "shelving":
         d = np.array([0.0, -1.0, 0.25])
@@ -96,9 +96,14 @@ def plot_predictions(prediction_stores: list[str | Path], scene_stores: list[str
                                 va="center", fontsize=7, transform=ax.transAxes)
                         continue
                     target = sc.target_init_pose[c, :3] if which == "init" else sc.target_goal_pose[c, :3]
-                    eye, look = close_camera(target, first_attrs["task"])
+                    verts = hand.vertices(arrays[f"grasp_{which}"][where[0], kept[:1]])[0]
+                    # toward the hand by at most 6 cm: a hand at the target is whole in view with the scene
+                    # around both; a hand far from it is left out of view rather than the target
+                    shift = 0.5 * (verts.mean(0) - target)
+                    shift *= min(1.0, 0.06 / max(float(np.linalg.norm(shift)), 1e-9))
+                    eye, look = close_camera(target + shift, first_attrs["task"])
                     load_configuration(world, sc, c, objects_dir, supports, which=which, static=True, colors=COLORS)
-                    _add_hand(world, hand.vertices(arrays[f"grasp_{which}"][where[0], kept[:1]])[0], faces)
+                    _add_hand(world, verts, faces)
                     ax.imshow(world.render(eye, look, *size))
             axes[r, 0].text(-0.05, 0.5, f"{name} #{c}", rotation=90, ha="right", va="center", fontsize=7,
                             transform=axes[r, 0].transAxes)
