@@ -26,7 +26,9 @@ def _rows(rng: np.random.Generator, objects: int = 20, configs: int = 6, grasps:
         "task": "placing", "method": method, "object": np.char.add("o", o.ravel().astype(str)),
         "config_index": c.ravel(), "sample": g.ravel(), "pv": np.where(good, 1e-6, 5e-6) * rng.uniform(0.5, 1.0, n),
         "sd": np.where(good, 0.01, 0.05), "contact_distance": 0.0, "init_opp": rng.uniform(0, 0.02, n),
-        "goal_opp": rng.uniform(0, 0.02, n), "ds": ds, "hand_vertices": 1609, "kept": True})
+        "goal_opp": rng.uniform(0, 0.02, n), "ds": ds, "hand_vertices": 1609, "kept": True,
+        # robust SD's perturbed SDs for the first two grasps of each configuration, none for the others
+        "sd_perturbed": [list(rng.uniform(0.0, 0.04, 3)) if k < 2 else [] for k in g.ravel()]})
 
 
 def test_the_cells_of_unit_weights_are_the_tables_values():
@@ -35,8 +37,9 @@ def test_the_cells_of_unit_weights_are_the_tables_values():
     keys = config_keys(rows)
     values = cells(np.ones((1, len(keys))), config_stats(rows, keys, T.max_pv, T.max_sd))
     expect = summarize(rows, T)
+    assert set(values) >= {"qr", "ts", "sd_robust", "sd_pass", "sd_unstable"}
     for k, v in values.items():
-        assert v[0] == pytest.approx(expect[k], rel=1e-9, abs=1e-12), k
+        assert np.isfinite(v[0]) and v[0] == pytest.approx(expect[k], rel=1e-9, abs=1e-12), k
 
 
 def test_the_interval_covers_a_known_mean_at_the_stated_rate():
@@ -102,3 +105,22 @@ def test_claims_hold_fail_or_cannot_tell_by_their_paired_interval():
     assert out.loc["d", "than"] == "bad" and abs(out.loc["d", "difference"]) < 0.5
     assert out.loc["e", "verdict"].startswith("not checked: other")
     assert "| a: " in claims_markdown(out.reset_index(), 0.95)
+    # objects needed to tell: a claim already told needs the objects it has; an undecided one more
+    assert out.loc["a", "objects"] == 6 and out.loc["a", "objects_needed"] == 6
+    assert not out.loc["c", "objects_needed"] <= 6
+
+
+def test_objects_needed_follows_the_square_root_law():
+    """A difference of d with a half-width h over K objects needs about K (h / d)^2 objects: the
+    bootstrap's answer is within the grid's step of it (a factor 2 either way)."""
+    from tohgs.metrics.claims import claims_table
+
+    rows = pd.concat([_rows(np.random.default_rng(8), objects=8, method="a", mean=0.62, spread=0.2),
+                      _rows(np.random.default_rng(9), objects=8, method="b", mean=0.55, spread=0.2)],
+                     ignore_index=True)  # objects o0..o7 for both: a paired comparison
+    out = claims_table(rows, {"x": {"table": "t", "better": "a", "than": ["b"]}}, {"t": {"rows": ["a", "b"]}}, {}, T,
+                       BootstrapSettings(samples=400), ["placing"]).iloc[0]
+    half, d = (out.hi - out.lo) / 2, abs(out.difference)
+    expected = 8 * (half / d) ** 2
+    assert out.verdict == "cannot tell" and expected > 8
+    assert expected / 2.5 <= out.objects_needed <= expected * 2.5, (out.objects_needed, expected)

@@ -67,7 +67,8 @@ def _rows(pv, sd, init_opp, goal_opp, method="ours", task="placing", config=None
     return pd.DataFrame({"task": task, "method": method, "object": "pb-x", "config_index": config,
                          "sample": np.arange(n), "pv": pv, "sd": sd, "contact_distance": 0.0,
                          "init_opp": init_opp, "goal_opp": goal_opp, "ds": config * 1.0 + 1.0,
-                         "hand_vertices": 778, "kept": True if kept is None else kept})[list(COLUMNS)]
+                         "hand_vertices": 778, "kept": True if kept is None else kept,
+                         "sd_perturbed": [[] for _ in range(n)]})[list(COLUMNS)]
 
 
 def test_summary_numbers_follow_their_definitions():

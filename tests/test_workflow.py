@@ -227,6 +227,11 @@ def test_smoke_run_outputs(smoke_run):
     # expansion lets vertices sink at most 2 mm into the scene).
     ref = table[(table.method == "Dataset") & (table.grasps > 0)]
     assert len(ref) and (ref.init_opp < 1.0).all() and (ref.goal_opp < 1.0).all()
+    # robust SD (evaluation.robust_sd: the smoke perturbs Ours' grasps only): filled there, empty elsewhere
+    robust = cfg["evaluation"]["robust_sd"]["methods"]
+    with_robust = with_grasps.method.isin([labels[m] for m in robust])
+    assert with_robust.any() and with_grasps[with_robust].sd_pass.between(0, 100).all()
+    assert with_grasps[~with_robust].sd_robust.isna().all()
     assert len(pd.read_csv(smoke_run / "results/tables/table1_qr_grid.csv")) == 3 * len(methods) * 12
     assert "| Task |" in (smoke_run / "results/tables/table1.md").read_text()
     assert (smoke_run / "results/figures/contact_maps.png").stat().st_size > 20_000
@@ -478,6 +483,51 @@ def test_a_method_and_a_table_added_by_config_alone_run_through_prediction_evalu
 
     _, attrs = read_predictions(smoke_run / "results/predictions/placing/ours-ddpm.zarr")
     assert attrs["config"]["sampler"] == "ddpm" and attrs["config"]["steps"] == 10
+    assert _stale_jobs(smoke_run) == {}
+
+
+def test_a_second_seed_adds_replicas_and_the_table_pools_them(smoke_run):
+    """``seeds: [0, 1]``: a table of the Dataset row needs only its seed-1 replica's prediction and
+    evaluation (the first seed's outputs stay as they were); the table pools both seeds' grasps and gives
+    their spread. A table of Ours would train each of its components once more per task."""
+    added = {"seeds": [0, 1], "tables": {"seeded": {"rows": ["dataset"], "columns": ["qr", "ts", "grasps", "configs"]}}}
+    (smoke_run / "seeds.yaml").write_text(yaml.safe_dump(added))
+    ours = {"seeds": [0, 1], "tables": {"seeded": {"rows": ["ours"], "columns": ["qr", "ts"]}}}
+    (smoke_run / "seeds_ours.yaml").write_text(yaml.safe_dump(ours))
+
+    def command(extra):
+        return [sys.executable, "-m", "snakemake", "--cores", "2", "results/tables/seeded.csv", "--configfile",
+                ".test/config/config.yaml", extra]
+
+    def jobs_of(extra):
+        dry = subprocess.run([*command(extra), "-n", "--quiet", "rules"], cwd=smoke_run, capture_output=True,
+                             text=True, timeout=600, env=_env(smoke_run))
+        assert dry.returncode == 0, dry.stderr[-3000:]
+        block = (dry.stdout + dry.stderr).split("Job stats:", 1)[1]
+        return {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+)\s+(\d+)$", block, re.M) if m.group(1) != "total"}
+
+    assert jobs_of("seeds.yaml") == {"predict": 3, "evaluate": 3, "table": 1}
+    # ContactDiffuser and GraspDiffuser once more per task
+    assert jobs_of("seeds_ours.yaml") == {"train": 6, "predict": 3, "evaluate": 3, "table": 1}
+    cmd = command("seeds.yaml")
+    run = subprocess.run(cmd, cwd=smoke_run, capture_output=True, text=True, timeout=1200, env=_env(smoke_run))
+    assert run.returncode == 0, (run.stdout + run.stderr)[-4000:]
+    table = pd.read_csv(smoke_run / "results/tables/seeded.csv")
+    one = pd.read_csv(smoke_run / "results/tables/table1.csv")
+    one = one[one.method == "Dataset"].reset_index(drop=True)
+    assert list(table.method) == ["Dataset"] * 3
+    assert (table.grasps == 2 * one.grasps).all() and (table.configs == one.configs).all()
+    assert {"ts_seed_sd", "qr_seed_sd"} <= set(table.columns)
+    assert table.ts_seed_sd[table.grasps > 0].notna().all()
+    import numpy as np
+
+    from tohgs.data.predictions import read_predictions
+
+    # Stacking's test configurations have more task grasps than samples: the seed draws others (Placing's
+    # have no more than the samples, which every seed takes in turn)
+    a, _ = read_predictions(smoke_run / "results/predictions/stacking/dataset.zarr")
+    b, attrs = read_predictions(smoke_run / "results/predictions/stacking/dataset-seed1.zarr")
+    assert attrs["config"]["seed"] == 1 and not np.array_equal(a["grasp_init"], b["grasp_init"])
     assert _stale_jobs(smoke_run) == {}
 
 

@@ -16,7 +16,7 @@ from typing import Any
 import jsonschema
 import yaml
 
-from tohgs.methods import method_kind_exists
+from tohgs.methods import NOT_COMPONENT_KEYS, method_components, method_kind_exists
 from tohgs.models import component_kind_exists
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -212,6 +212,10 @@ def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -
             if m not in cfg["methods"]:
                 raise ConfigError(f"config key 'claims.{name}': {m!r} is not a method (methods: "
                                   f"{', '.join(sorted(cfg['methods']))})")
+    for m in cfg["evaluation"]["robust_sd"]["methods"]:
+        if m not in cfg["methods"]:
+            raise ConfigError(f"config key 'evaluation.robust_sd.methods': {m!r} is not a method (methods: "
+                              f"{', '.join(sorted(cfg['methods']))})")
     for key in ("methods", "contact_methods"):
         for m in cfg["figures"][key]:
             if m not in cfg["methods"]:
@@ -263,6 +267,58 @@ def validate_config(cfg: dict[str, Any], schema: Mapping[str, Any] | None = None
     _semantic_checks(cfg, base)
     _components_methods_tables(cfg, schema)
     return cfg
+
+
+def replica_name(name: str, seeds: list[int], seed: int) -> str:
+    """The name of component or method ``name``'s replica of ``seed``: the name itself for the first of
+    ``seeds``, ``<name>-seed<seed>`` for the others."""
+    return name if seed == seeds[0] else f"{name}-seed{seed}"
+
+
+def add_seed_replicas(cfg: dict[str, Any], methods: list[str] | None = None) -> dict[str, list[str]]:
+    """Add, in place, the replicas of the config's ``seeds`` (a validated config): for every seed but the
+    first, a copy of each of ``methods`` (default: all) and of the components and methods they build on,
+    named by :func:`replica_name`, whose training seed is ``training.seed + s`` (the component's own
+    overlay's, if it sets one) and whose prediction seed is ``prediction.seed + s``; a replica's
+    component and method references name the same seed's replicas. The first seed's blocks get the same
+    offsets, and are left untouched when it is 0 (so one seed ``[0]`` is the config as written).
+
+    Returns:
+        Each method's replicas, the method itself first: ``{"ours": ["ours", "ours-seed1", ...]}``.
+    """
+    seeds = list(cfg["seeds"])
+    comps, meths = cfg["components"], cfg["methods"]
+    names = list(meths) if methods is None else list(methods)
+    closure: list[str] = []
+    for m in names:  # the methods with those they are of (kind filtered)
+        chain = [m]
+        while "of" in meths[chain[-1]]:
+            chain.append(meths[chain[-1]]["of"])
+        closure += [c for c in reversed(chain) if c not in closure]
+    used = list(dict.fromkeys(c for m in closure for c in method_components(meths[m], comps)))
+    base_comps = {c: copy.deepcopy(comps[c]) for c in used}
+    base_meths = {m: copy.deepcopy(meths[m]) for m in closure}
+    replicas: dict[str, list[str]] = {m: [] for m in closure}
+    for s in seeds:
+        if s == 0 and s == seeds[0]:
+            for m in closure:
+                replicas[m].append(m)
+            continue
+        for c, block in base_comps.items():
+            rep = copy.deepcopy(block)
+            rep["training"]["seed"] = int(block["training"].get("seed", cfg["training"]["seed"])) + s
+            comps[replica_name(c, seeds, s)] = rep
+        for m, block in base_meths.items():
+            rep = copy.deepcopy(block)
+            for key, value in block.items():
+                if key in NOT_COMPONENT_KEYS or not isinstance(value, str):
+                    continue
+                if value in base_comps or (key == "of" and value in base_meths):
+                    rep[key] = replica_name(value, seeds, s)
+            rep["settings"]["seed"] = int(block["settings"].get("seed", cfg["prediction"]["seed"])) + s
+            meths[replica_name(m, seeds, s)] = rep
+            replicas[m].append(replica_name(m, seeds, s))
+    return replicas
 
 
 def load_config(path: Path | str, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:

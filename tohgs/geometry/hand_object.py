@@ -45,8 +45,14 @@ def nearest_vertex(points: torch.Tensor, hand_verts: torch.Tensor) -> tuple[torc
     nearest vertex), at a fraction of the cost (the backward pass of the full B x N x V distance matrix was
     two thirds of a training step)."""
     idx = nearest_index(points, hand_verts)
-    near = torch.gather(hand_verts, 1, idx[..., None].expand(-1, -1, 3))
-    return ((points - near) ** 2).sum(-1).add(1e-12).sqrt(), idx
+    return distance_to_vertices(points, hand_verts, idx), idx
+
+
+def distance_to_vertices(points: torch.Tensor, verts: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
+    """(B, N) the distance, m, of each of (B, N, 3) points to its given vertex ``idx`` (B, N) of (B, V, 3)
+    ``verts``, differentiable in both (an epsilon under the root keeps the gradient finite at 0)."""
+    near = torch.gather(verts, 1, idx[..., None].expand(-1, -1, 3))
+    return ((points - near) ** 2).sum(-1).add(1e-12).sqrt()
 
 
 def contact_values(points: torch.Tensor, hand_verts: torch.Tensor, alpha: float) -> tuple[torch.Tensor, torch.Tensor]:

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import torch
 
 from tohgs.geometry.contact_parts import N_PARTS, PartContact, part_contact
-from tohgs.geometry.hand_object import nearest_index, vertex_normals
+from tohgs.geometry.hand_object import distance_to_vertices, nearest_index, vertex_normals
 from tohgs.grasps.tta import clamp_to_limits
 from tohgs.hand.model import HandModel
 
@@ -88,13 +88,6 @@ def nearest_part_vertex(points: torch.Tensor, part: torch.Tensor, vertices: torc
         return torch.gather(cand, 2, d.argmin(-1, keepdim=True))[..., 0]
 
 
-def distance_to(points: torch.Tensor, vertices: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
-    """(B, K) distance (m) of (B, K, 3) points to the (B, K) indexed ones of (B, V, 3) vertices,
-    differentiable in both."""
-    near = torch.gather(vertices, 1, idx[..., None].expand(-1, -1, 3))
-    return ((points - near) ** 2).sum(-1).add(1e-12).sqrt()
-
-
 def default_start(hand: HandModel, batch: int) -> torch.Tensor:
     """(B, 51) the start grasps (module docstring): prior-mean fingers, no rotation, the palm's contact
     vertices centred on the origin (the object's centroid in the network frame)."""
@@ -128,7 +121,7 @@ def solver_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, ta
             nearest["table"] = part_table(hand.part_labels)
         sel_part = torch.gather(target.part, 1, idx)
         nearest["part"] = nearest_part_vertex(sel_points, sel_part, out.vertices, nearest["table"])
-    d_part = distance_to(sel_points, out.vertices, nearest["part"])
+    d_part = distance_to_vertices(sel_points, out.vertices, nearest["part"])
     terms = {"contact": s.w_contact * scale * (weight * d_part).sum(-1)}
     # the current directions of every point in its target part's frame (the nearest-vertex part and the
     # contact of part_contact are not used here: the parts are the target's)

@@ -34,7 +34,8 @@ from dataclasses import dataclass
 
 import torch
 
-from tohgs.geometry.hand_object import contact_values, inside_hand, nearest_vertex, vertex_normals
+from tohgs.geometry.hand_object import (contact_values, distance_to_vertices, inside_hand, nearest_vertex,
+                                       vertex_normals)
 from tohgs.hand.model import HandModel
 
 OFFICIAL_POINTS = 3000  # the official code's object points: the point sums are scaled to this many
@@ -81,8 +82,7 @@ def tta_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, conta
         c_hand, idx = contact_values(points, verts, alpha)
     else:
         idx = nearest
-        near = torch.gather(verts, 1, idx[..., None].expand(-1, -1, 3))
-        d = ((points - near) ** 2).sum(-1).add(1e-12).sqrt()
+        d = distance_to_vertices(points, verts, idx)
         c_hand = 1.0 - 2.0 * (torch.sigmoid(alpha * d) - 0.5)
     with torch.no_grad():
         c_target = contact_net.predict_map(points, verts, c_hand.detach(), object_features)

@@ -65,6 +65,12 @@ class Method:
         self.name, self.cfg, self.models, self.settings, self.device = name, cfg, models, settings, device
         self.hand, self.base = hand, base
 
+    def require_hand(self, why: str) -> torch.nn.Module:
+        """The hand model, or a clear error naming the method and ``why`` it poses hands."""
+        if self.hand is None:
+            raise ValueError(f"method {self.name!r}: {why}; the prediction job needs the hand model")
+        return self.hand
+
     def model(self, key: str) -> torch.nn.Module:
         """The component the method key ``key`` names (a clear error when the job was not given it)."""
         comp = self.cfg.get(key)

@@ -24,8 +24,7 @@ class ContactGenMethod(Method):
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        if self.hand is None:
-            raise ValueError(f"method {self.name!r}: ContactGen's solver poses hands; the prediction job needs the hand model")
+        self.require_hand("ContactGen's solver poses hands")
         self.generator = self.model("model")
         if not getattr(getattr(self.generator, "cfg", None), "parts", False):
             raise ValueError(f"method {self.name!r}: its model {self.cfg['model']!r} samples no parts and directions "

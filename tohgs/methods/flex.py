@@ -26,8 +26,7 @@ class Flex(Method):
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        if self.hand is None:
-            raise ValueError(f"method {self.name!r}: FLEX poses hands; the prediction job needs the hand model")
+        self.require_hand("FLEX poses hands")
         self.prior = self.model("prior")
         self.flex = settings_from(FlexSettings, self.settings.flex)
         if self.flex.survivors() < self.settings.samples:

@@ -33,8 +33,7 @@ class GraspTTA(Method):
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        if self.hand is None:
-            raise ValueError(f"method {self.name!r}: GraspTTA adapts hands; the prediction job needs the hand model")
+        self.require_hand("GraspTTA adapts hands")
         self.generator = self.model("cvae")
         self.contact_net = self.model("contact_net")
         src = self.cfg["contact"]

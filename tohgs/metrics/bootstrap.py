@@ -21,8 +21,29 @@ import numpy as np
 import pandas as pd
 
 #: The cells that get intervals (the counts ``grasps``, ``configs`` and ``discarded`` do not).
-INTERVAL_COLUMNS = ("pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "init_opp", "goal_opp", "ts")
-_STATS = ("n", "pv", "pv2", "sd", "sd2", "contact", "quality", "init_opp", "goal_opp", "ds", "has_ds")
+INTERVAL_COLUMNS = ("pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "init_opp", "goal_opp", "ts",
+                    "sd_robust", "sd_pass", "sd_unstable")
+_STATS = ("n", "pv", "pv2", "sd", "sd2", "contact", "quality", "init_opp", "goal_opp", "ds", "has_ds",
+          "n_robust", "sd_robust", "sd_pass", "sd_unstable")
+
+
+def robust_stats(frame: pd.DataFrame, max_sd: float) -> pd.DataFrame:
+    """Per grasp of ``frame`` with perturbed SDs (column ``sd_perturbed``, lists in m; the others are
+    dropped): ``sd_robust`` their median (m), ``sd_pass`` the fraction under ``max_sd``, ``sd_unstable`` 1
+    where the verdicts (SD < max_sd) of the protocol's SD and the perturbed ones are not all the same."""
+    cols = ["object", "config_index", "sd_robust", "sd_pass", "sd_unstable"]
+    if "sd_perturbed" not in frame.columns or len(frame) == 0:
+        return pd.DataFrame(columns=cols)
+    has = frame.sd_perturbed.map(lambda v: isinstance(v, (list, tuple, np.ndarray)) and len(v) > 0).to_numpy(bool)
+    f = frame[has]
+    if len(f) == 0:
+        return pd.DataFrame(columns=cols)
+    values = [np.asarray(v, dtype=np.float64) for v in f.sd_perturbed]
+    passes = [float((v < max_sd).mean()) for v in values]
+    unstable = [float(len({bool(x < max_sd) for x in v} | {bool(sd < max_sd)}) > 1) for v, sd in zip(values, f.sd)]
+    return pd.DataFrame({"object": f.object.to_numpy(), "config_index": f.config_index.to_numpy(),
+                         "sd_robust": [float(np.median(v)) for v in values], "sd_pass": passes,
+                         "sd_unstable": unstable})
 
 
 @dataclass(frozen=True)
@@ -44,9 +65,10 @@ def config_keys(frame: pd.DataFrame) -> pd.DataFrame:
 
 
 def config_stats(frame: pd.DataFrame, keys: pd.DataFrame, max_pv: float, max_sd: float) -> np.ndarray:
-    """(C, 11) per configuration of ``keys``: kept grasps n, the sums of PV, PV^2, SD, SD^2 (SI units), the
+    """(C, 15) per configuration of ``keys``: kept grasps n, the sums of PV, PV^2, SD, SD^2 (SI units), the
     counts in contact (PV > 0) and of quality (PV < max_pv and SD < max_sd), the sums of the two OPPs
-    (fractions), the configuration's DS and whether it has one (kept grasps)."""
+    (fractions), the sum of the configuration's DS over its seeds and how many seeds have one; then the
+    count of grasps with perturbed SDs and the sums of their :func:`robust_stats`."""
     if "kept" in frame.columns:
         frame = frame[frame.kept.astype(bool)]
     out = np.zeros((len(keys), len(_STATS)))
@@ -55,20 +77,30 @@ def config_stats(frame: pd.DataFrame, keys: pd.DataFrame, max_pv: float, max_sd:
     f = frame.assign(pv2=frame.pv**2, sd2=frame.sd**2, contact=(frame.pv > 0).astype(float),
                      quality=((frame.pv < max_pv) & (frame.sd < max_sd)).astype(float))
     g = f.groupby(["object", "config_index"])
+    # DS per configuration and seed (rows of several seeds pooled, tohgs.metrics.tables.read_metrics)
+    ds = f.groupby(["object", "config_index"] + (["seed"] if "seed" in f.columns else [])).ds.first()
+    ds_g = ds.groupby(level=["object", "config_index"])
     agg = pd.DataFrame({"n": g.size(), "pv": g.pv.sum(), "pv2": g.pv2.sum(), "sd": g.sd.sum(), "sd2": g.sd2.sum(),
                         "contact": g.contact.sum(), "quality": g.quality.sum(), "init_opp": g.init_opp.sum(),
-                        "goal_opp": g.goal_opp.sum(), "ds": g.ds.first(), "has_ds": 1.0})
+                        "goal_opp": g.goal_opp.sum(), "ds": ds_g.sum(), "has_ds": ds_g.count().astype(float)})
+    rob = robust_stats(frame, max_sd)
+    if len(rob):
+        gr = rob.groupby(["object", "config_index"])
+        agg = agg.join(pd.DataFrame({"n_robust": gr.size(), "sd_robust": gr.sd_robust.sum(),
+                                     "sd_pass": gr.sd_pass.sum(), "sd_unstable": gr.sd_unstable.sum()}))
     idx = pd.MultiIndex.from_frame(keys)
-    return agg.reindex(idx).fillna(0.0)[list(_STATS)].to_numpy(dtype=np.float64)
+    return agg.reindex(idx).reindex(columns=list(_STATS)).fillna(0.0).to_numpy(dtype=np.float64)
 
 
 def cells(weights: np.ndarray, stats: np.ndarray) -> dict[str, np.ndarray]:
     """Every interval column (units as the tables': cm^3, cm, %) for (B, C) configuration weights and
-    (C, 11) :func:`config_stats`; (B,) each, NaN where a resample holds no kept grasp."""
-    s = weights @ stats  # (B, 11)
+    (C, 15) :func:`config_stats`; (B,) each, NaN where a resample holds no kept grasp (no perturbed one
+    for the robust-SD columns)."""
+    s = weights @ stats  # (B, 15)
     col = {k: s[:, i] for i, k in enumerate(_STATS)}
     with np.errstate(invalid="ignore", divide="ignore"):
         n = np.where(col["n"] > 0, col["n"], np.nan)
+        nr = np.where(col["n_robust"] > 0, col["n_robust"], np.nan)
         pv, sd = col["pv"] / n, col["sd"] / n
         qr = col["quality"] / n
         init, goal = col["init_opp"] / n, col["goal_opp"] / n
@@ -76,13 +108,17 @@ def cells(weights: np.ndarray, stats: np.ndarray) -> dict[str, np.ndarray]:
                 "sd_avg": sd * 100, "sd_std": np.sqrt(np.maximum(col["sd2"] / n - sd**2, 0)) * 100,
                 "cr": col["contact"] / n * 100, "qr": qr * 100,
                 "ds": col["ds"] / np.where(col["has_ds"] > 0, col["has_ds"], np.nan),
-                "init_opp": init * 100, "goal_opp": goal * 100, "ts": qr * (1 - init) * (1 - goal)}
+                "init_opp": init * 100, "goal_opp": goal * 100, "ts": qr * (1 - init) * (1 - goal),
+                "sd_robust": col["sd_robust"] / nr * 100, "sd_pass": col["sd_pass"] / nr * 100,
+                "sd_unstable": col["sd_unstable"] / nr * 100}
 
 
-def resample_weights(objects: np.ndarray, samples: int, rng: np.random.Generator) -> np.ndarray:
+def resample_weights(objects: np.ndarray, samples: int, rng: np.random.Generator,
+                     draws: int | None = None) -> np.ndarray:
     """(samples, C) hierarchical bootstrap weights for C configurations of the given (C,) objects: draw as
-    many objects as there are, with replacement; within each drawn object, as many of its configurations
-    as it has, with replacement; a configuration's weight is how often it was drawn."""
+    many objects as there are (or ``draws``: a test set of that many objects like these), with
+    replacement; within each drawn object, as many of its configurations as it has, with replacement; a
+    configuration's weight is how often it was drawn."""
     objects = np.asarray(objects)
     c = len(objects)
     _, members = np.unique(objects, return_inverse=True)
@@ -90,9 +126,9 @@ def resample_weights(objects: np.ndarray, samples: int, rng: np.random.Generator
     sizes = np.bincount(members)
     starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
     k = len(sizes)
-    drawn = rng.integers(0, k, (samples, k))  # (B, K) the objects drawn
+    drawn = rng.integers(0, k, (samples, k if draws is None else int(draws)))  # (B, K) the objects drawn
     slot = np.arange(sizes.max())  # (M,) the draws within an object, the first sizes[obj] of them real
-    u = rng.random((samples, k, len(slot)))
+    u = rng.random((*drawn.shape, len(slot)))
     pick = starts[drawn][..., None] + np.floor(u * sizes[drawn][..., None]).astype(np.int64)  # (B, K, M)
     real = slot[None, None, :] < sizes[drawn][..., None]
     flat = (np.arange(samples)[:, None, None] * c + order[pick])[real]

@@ -11,6 +11,12 @@ where lower is better) is computed on the whole test set and on every hierarchic
 (:mod:`tohgs.metrics.bootstrap`; the same resamples for every method, so the comparison is paired). The
 verdict: **holds** where the interval's lower end is above 0, **does not hold** where its upper end is
 below 0, **cannot tell** otherwise.
+
+``objects_needed``: how many test objects per task the benchmark would need for the interval to exclude 0,
+were the difference what it is here, measured from the bootstrap: test sets of K' objects drawn (with
+replacement, then their configurations) from the K of this run, for K' = K, 2K, 3K, 4K, 6K, 8K, ...
+(:data:`SCALES`); the first K' whose interval of the difference excludes 0 (K where the verdict is told
+already). NaN past the largest, or with no difference.
 """
 
 from __future__ import annotations
@@ -23,7 +29,30 @@ from tohgs.metrics.bootstrap import (INTERVAL_COLUMNS, BootstrapSettings, cells,
 from tohgs.metrics.tables import QualityThresholds
 
 LOWER_IS_BETTER = ("pv_avg", "pv_std", "sd_avg", "sd_std", "init_opp", "goal_opp")
-CLAIM_COLUMNS = ("claim", "text", "task", "metric", "better", "than", "difference", "lo", "hi", "verdict")
+CLAIM_COLUMNS = ("claim", "text", "task", "metric", "better", "than", "difference", "lo", "hi", "verdict",
+                 "objects", "objects_needed")
+SCALES = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64)  # test sets of K' = scale x K objects (objects_needed)
+
+
+def objects_needed(keys: pd.DataFrame, difference, bootstrap: BootstrapSettings, seed: list[int],
+                   scales=SCALES) -> float:
+    """The smallest K' = scale x K test objects (K those of ``keys``) whose hierarchical bootstrap interval
+    of ``difference(weights)`` (a function of (B, C) weights returning (B,) values) excludes 0; NaN if none
+    of ``scales`` does (module docstring)."""
+    objects = keys.object.to_numpy()
+    k = len(np.unique(objects))
+    tail = (1 - bootstrap.level) / 2 * 100
+    samples = max(200, bootstrap.samples)
+    for scale in scales:
+        w = resample_weights(objects, samples, np.random.default_rng([*seed, scale]), draws=scale * k)
+        d = difference(w)
+        d = d[np.isfinite(d)]
+        if len(d) == 0:
+            return float("nan")
+        lo, hi = np.percentile(d, [tail, 100 - tail])
+        if lo > 0 or hi < 0:
+            return float(scale * k)
+    return float("nan")
 
 
 def verdict(lo: float, hi: float) -> str:
@@ -31,6 +60,17 @@ def verdict(lo: float, hi: float) -> str:
     if not (np.isfinite(lo) and np.isfinite(hi)):
         return "cannot tell"
     return "holds" if lo > 0 else "does not hold" if hi < 0 else "cannot tell"
+
+
+def needed(keys: pd.DataFrame, difference, told: str, bootstrap: BootstrapSettings, value: float,
+           seed: list[int]) -> float:
+    """``objects_needed`` of a claim's row: this run's objects where its verdict is told already, else the
+    first larger test set of :func:`objects_needed` (NaN without intervals or a difference)."""
+    if bootstrap.samples == 0 or not np.isfinite(value):
+        return float("nan")
+    if told in ("holds", "does not hold"):
+        return float(keys.object.nunique())
+    return objects_needed(keys, difference, bootstrap, seed, SCALES[1:])
 
 
 def claim_rows(rows: pd.DataFrame, name: str, claim: dict, table_rows: list[str], labels: dict[str, str],
@@ -51,22 +91,30 @@ def claim_rows(rows: pd.DataFrame, name: str, claim: dict, table_rows: list[str]
             why = f"not checked: {', '.join(missing) if missing else 'nothing to compare'} not in {claim['table']}"
             out.append({"claim": name, "text": claim.get("text", ""), "task": task, "metric": metric,
                         "better": labels.get(better, better), "than": ", ".join(labels.get(m, m) for m in than),
-                        "difference": np.nan, "lo": np.nan, "hi": np.nan, "verdict": why})
+                        "difference": np.nan, "lo": np.nan, "hi": np.nan, "verdict": why, "objects": 0,
+                        "objects_needed": np.nan})
             continue
         in_task = rows[(rows.task == task) & rows.method.isin([better, *than])]
         keys = config_keys(in_task)
         weights = np.vstack([np.ones((1, len(keys))),
                              resample_weights(keys.object.to_numpy(), samples,
                                               np.random.default_rng([bootstrap.seed, tasks.index(task), 7]))])
-        values = {m: sign * cells(weights, config_stats(in_task[in_task.method == m], keys, t.max_pv, t.max_sd))[metric]
-                  for m in [better, *than]}
-        diff = values[better] - np.max(np.stack([values[m] for m in than]), 0)  # (1 + B,): the whole set first
+        stats = {m: config_stats(in_task[in_task.method == m], keys, t.max_pv, t.max_sd) for m in [better, *than]}
+
+        def difference(w: np.ndarray) -> np.ndarray:
+            values = {m: sign * cells(w, stats[m])[metric] for m in stats}
+            return values[better] - np.max(np.stack([values[m] for m in than]), 0)
+
+        diff = difference(weights)  # (1 + B,): the whole set first
         tail = (1 - bootstrap.level) / 2 * 100
         boot = diff[1:][np.isfinite(diff[1:])]
         lo, hi = (np.percentile(boot, [tail, 100 - tail]) if len(boot) and bootstrap.samples > 0 else (np.nan, np.nan))
         out.append({"claim": name, "text": claim.get("text", ""), "task": task, "metric": metric,
                     "better": labels.get(better, better), "than": ", ".join(labels.get(m, m) for m in than),
-                    "difference": float(diff[0]), "lo": float(lo), "hi": float(hi), "verdict": verdict(lo, hi)})
+                    "difference": float(diff[0]), "lo": float(lo), "hi": float(hi), "verdict": verdict(lo, hi),
+                    "objects": int(keys.object.nunique()),
+                    "objects_needed": needed(keys, difference, verdict(lo, hi), bootstrap, diff[0],
+                                             [bootstrap.seed, tasks.index(task), 11])})
     return out
 
 
@@ -83,14 +131,18 @@ def claims_table(rows: pd.DataFrame, claims: dict[str, dict], tables: dict[str, 
 
 def claims_markdown(table: pd.DataFrame, level: float) -> str:
     """The claims table in markdown: per claim and task, the difference with its interval and the verdict."""
-    lines = [f"| Claim | Task | Metric | Method | Against (best of) | Difference | {level:.0%} interval | Verdict |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [f"| Claim | Task | Metric | Method | Against (best of) | Difference | {level:.0%} interval | Verdict | "
+             "Test objects: here / to tell |", "|---|---|---|---|---|---|---|---|---|"]
     for _, r in table.iterrows():
         interval = "–" if not np.isfinite(r.lo) else f"[{r.lo:+.3f}, {r.hi:+.3f}]"
         diff = "–" if not np.isfinite(r.difference) else f"{r.difference:+.3f}"
+        need = (f"{int(r.objects_needed)}" if np.isfinite(r.objects_needed) else
+                f"> {SCALES[-1] * int(r.objects)}" if np.isfinite(r.difference) else "–")
         lines.append(f"| {r.claim}: {r.text} | {r.task} | {r.metric} | {r.better} | {r.than} | {diff} | "
-                     f"{interval} | {r.verdict} |")
+                     f"{interval} | {r.verdict} | {int(r.objects)} / {need} |")
     lines += ["", "Difference: the method's value minus the best of the others' (for OPP, PV and SD the others' "
               "minus the method's), so a positive value favours the method; intervals from the hierarchical "
-              "bootstrap over test objects and configurations, paired across methods."]
+              "bootstrap over test objects and configurations, paired across methods. Test objects to tell: "
+              "the fewest test objects per task (drawn like this run's) whose interval would exclude 0 at "
+              "this difference, from the bootstrap."]
     return "\n".join(lines) + "\n"

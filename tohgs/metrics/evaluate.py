@@ -36,12 +36,13 @@ from tohgs.data.predictions import read_predictions
 from tohgs.data.scenes import read_scenes
 from tohgs.geometry.scene import SceneCollider, scene_meshes
 from tohgs.hand.assets import HandAssets
-from tohgs.metrics.quality import DisplacementSimulator, SDSettings, hand_quality, surface_voxels
+from tohgs.metrics.quality import DisplacementSimulator, RobustSDSettings, SDSettings, hand_quality, surface_voxels
 
 log = logging.getLogger(__name__)
 
 COLUMNS = ("task", "method", "object", "config_index", "sample", "pv", "sd", "contact_distance", "init_opp",
-           "goal_opp", "ds", "hand_vertices", "kept")
+           "goal_opp", "ds", "hand_vertices", "kept", "sd_perturbed")
+OPTIONAL_COLUMNS = ("sd_perturbed",)  # robust SD's; metric rows without it read as having none
 
 
 def diversity(vertices: np.ndarray) -> float:
@@ -79,7 +80,8 @@ def _object_assets(objects_dir: Path, name: str, pitch: float, cache: dict, cach
 
 def grasp_metrics(verts_init: np.ndarray, verts_goal: np.ndarray, faces: np.ndarray, palm_ids: np.ndarray,
                   obj: _ObjectAssets, target_pose: np.ndarray, collider: SceneCollider, pitch: float,
-                  sim: DisplacementSimulator) -> dict[str, np.ndarray]:
+                  sim: DisplacementSimulator, robust: RobustSDSettings | None = None,
+                  robust_rngs: list[np.random.Generator] | None = None) -> dict[str, np.ndarray]:
     """PV, SD, contact distance (:func:`tohgs.metrics.quality.hand_quality`) and both OPPs of S hands of one
     configuration.
 
@@ -92,14 +94,26 @@ def grasp_metrics(verts_init: np.ndarray, verts_goal: np.ndarray, faces: np.ndar
         collider: the scene without the target.
         pitch: the PV voxel size.
         sim: a simulator of the target (its collision shape and the SD protocol).
+        robust, robust_rngs: robust SD's settings and one generator per hand (:func:`grasp_rng`), if any:
+            then ``"sd_perturbed"`` (S, K) too (:func:`~tohgs.metrics.quality.hand_quality`).
     """
-    m = hand_quality(verts_init, faces, palm_ids, obj.mesh, obj.voxels, sim, pitch, target_pose)
+    m = hand_quality(verts_init, faces, palm_ids, obj.mesh, obj.voxels, sim, pitch, target_pose,
+                     robust=robust, robust_rngs=robust_rngs)
     return {**m, "init_opp": occupied_fraction(verts_init, collider), "goal_opp": occupied_fraction(verts_goal, collider)}
+
+
+def grasp_rng(seed: int, obj: str, config_index: int, sample: int) -> np.random.Generator:
+    """The generator of one grasp's robust-SD perturbations: from the seed and the grasp's identity (its
+    object's name, configuration and sample), so the draws do not depend on what else is evaluated."""
+    import zlib
+
+    return np.random.default_rng([int(seed), zlib.crc32(obj.encode()), int(config_index), int(sample)])
 
 
 def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | Path], objects_dir: str | Path,
                          supports_json: str | Path, hand: HandAssets, sd: dict, voxel_pitch: float = 0.001,
-                         cache_dir: str | Path | None = None, progress: bool = False) -> pd.DataFrame:
+                         cache_dir: str | Path | None = None, progress: bool = False,
+                         robust_sd: dict | None = None) -> pd.DataFrame:
     """One row per predicted grasp (columns :data:`COLUMNS`) of one task and method.
 
     Args:
@@ -113,11 +127,15 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
         voxel_pitch: PV's voxel size, m.
         cache_dir: cache root of the objects' surface voxels (the prior grasps' stage fills it).
         progress: show a progress bar over configurations.
+        robust_sd: a config mapping of :class:`~tohgs.metrics.quality.RobustSDSettings` (None or
+            ``perturbations: 0``: no robust SD). Column ``sd_perturbed`` holds each grasp's K perturbed SDs,
+            m (an empty list for a grasp without them).
     """
     from tohgs.assets.supports import read_supports
 
     arrays, attrs = read_predictions(prediction_store)
     s_sd = settings_from(SDSettings, sd)
+    robust = settings_from(RobustSDSettings, robust_sd or {})
     scenes = {}
     for p in scene_stores:
         sc = read_scenes(p)
@@ -154,16 +172,20 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
             if kept.any():
                 v_init = hand.vertices(arrays["grasp_init"][i][kept])
                 v_goal = hand.vertices(arrays["grasp_goal"][i][kept])
+                rngs = [grasp_rng(robust.seed, name, c, k) for k in np.flatnonzero(kept)]
                 m = grasp_metrics(v_init, v_goal, faces, hand.palm_ids, obj, sc.target_init_pose[c], collider,
-                                  voxel_pitch, sims[name])
+                                  voxel_pitch, sims[name], robust, rngs)
                 if kept.all() or kept.sum() >= 2:
                     ds = diversity(v_init)
             at = np.cumsum(kept) - 1  # the row of each kept grasp among the metrics
+            perturbed = m.pop("sd_perturbed", None)
             for k in range(len(kept)):
                 values = ({key: float(val[at[k]]) for key, val in m.items()} if kept[k] else
                           dict.fromkeys(("pv", "sd", "contact_distance", "init_opp", "goal_opp"), float("nan")))
+                sd_k = perturbed[at[k]] if kept[k] and perturbed is not None else np.zeros(0)
                 rows.append({"task": attrs["task"], "method": attrs["method"], "object": name, "config_index": c,
-                             "sample": k, **values, "ds": ds, "hand_vertices": n_vertices, "kept": bool(kept[k])})
+                             "sample": k, **values, "ds": ds, "hand_vertices": n_vertices, "kept": bool(kept[k]),
+                             "sd_perturbed": [float(x) for x in sd_k if np.isfinite(x)]})
     finally:
         for sim in sims.values():
             sim.close()

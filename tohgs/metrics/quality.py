@@ -13,6 +13,9 @@
   when the hand approaches from the free side of its support (a table top, a shelf board), whatever
   orientation the object rests in; ``"fixed"`` uses the ``gravity`` vector of the grasp's frame (for
   grasps in the world frame, -z).
+- Robust SD (beyond the protocol): SD again under K tiny perturbations of the start (the hand moved by at
+  most half a millimetre, the solver's iterations jittered), for a few grasps per configuration
+  (:class:`RobustSDSettings`); the protocol's single SD stays the paper's QR.
 - Contact: PV > 0, and separately the smallest signed distance from the hand's vertices to the object's
   surface (negative inside), m.
 """
@@ -160,7 +163,8 @@ class DisplacementSimulator:
         self.close()
 
     def displacement(self, hand_vertices: np.ndarray, hand_faces: np.ndarray,
-                     object_pose: np.ndarray | None = None, gravity: np.ndarray | None = None) -> float:
+                     object_pose: np.ndarray | None = None, gravity: np.ndarray | None = None,
+                     solver_iterations: int | None = None) -> float:
         """SD of one hand, m.
 
         Args:
@@ -168,11 +172,14 @@ class DisplacementSimulator:
             hand_faces: (F, 3) hand triangles.
             object_pose: the object's mesh-frame pose ``[x, y, z, qx, qy, qz, qw]`` (default: identity).
             gravity: (3,) m/s^2 for this hand (default: the settings' ``gravity``).
+            solver_iterations: this simulation's solver iterations (default: the settings'; robust SD's
+                jitter, :func:`perturbed_displacements`).
         """
         pb, s, cid = self._client._pb, self.settings, self._client.cid
         g = np.asarray(s.gravity if gravity is None else gravity, dtype=np.float64)
+        iterations = s.solver_iterations if solver_iterations is None else int(solver_iterations)
         try:
-            self._client.reset_simulation(g.tolist(), s.time_step, s.solver_iterations)
+            self._client.reset_simulation(g.tolist(), s.time_step, iterations)
             hand_col = pb.createCollisionShape(pb.GEOM_MESH, vertices=np.asarray(hand_vertices, dtype=np.float64).tolist(),
                                                indices=np.asarray(hand_faces, dtype=np.int64).ravel().tolist(),
                                                flags=pb.GEOM_FORCE_CONCAVE_TRIMESH, physicsClientId=cid)
@@ -195,14 +202,58 @@ class DisplacementSimulator:
             return s.failed_displacement
 
 
+@dataclass(frozen=True)
+class RobustSDSettings:
+    """SD under tiny perturbations of its start (:func:`perturbed_displacements`): ``perturbations``
+    simulations per grasp (0: none), each with the hand moved by a random offset of at most ``offset`` (m,
+    uniform in a ball) and the solver's iterations changed by a random integer in
+    ``[-solver_jitter, solver_jitter]``; for the first ``grasps_per_config`` kept grasps of each
+    configuration (0: all of them); drawn from ``seed`` and the grasp's identity, so that a grasp gets the
+    same perturbations whatever else is evaluated with it."""
+
+    perturbations: int = 0
+    offset: float = 0.0005
+    solver_jitter: int = 10
+    grasps_per_config: int = 4
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.perturbations < 0 or self.offset < 0 or self.solver_jitter < 0 or self.grasps_per_config < 0:
+            raise ValueError(f"robust SD settings must be non-negative, got {self}")
+
+
+def perturbed_displacements(sim: DisplacementSimulator, hand_vertices: np.ndarray, hand_faces: np.ndarray,
+                            settings: RobustSDSettings, rng: np.random.Generator,
+                            object_pose: np.ndarray | None = None, gravity: np.ndarray | None = None) -> np.ndarray:
+    """(K,) SD of one hand, m, under K = ``settings.perturbations`` perturbed starts: the protocol of
+    :meth:`DisplacementSimulator.displacement` with the hand (V, 3) moved by a random offset in a ball of
+    radius ``settings.offset`` and the solver's iterations jittered (:class:`RobustSDSettings`).
+
+    The protocol's SD is one draw of a chaotic simulation for a marginal grasp (the same grasp can slip
+    1 cm or 11 cm after a sub-millimetre change); the spread of these K values says how far to trust it."""
+    k = settings.perturbations
+    direction = rng.normal(size=(k, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True).clip(1e-12)
+    radius = settings.offset * rng.random(k) ** (1.0 / 3.0)  # uniform in the ball
+    jitter = rng.integers(-settings.solver_jitter, settings.solver_jitter + 1, k)
+    base = sim.settings.solver_iterations
+    hv = np.asarray(hand_vertices, dtype=np.float64)
+    return np.array([sim.displacement(hv + radius[i] * direction[i], hand_faces, object_pose, gravity,
+                                      solver_iterations=max(1, base + int(jitter[i]))) for i in range(k)])
+
+
 IDENTITY_POSE = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])  # [x, y, z, qx, qy, qz, qw]
 
 
 def hand_quality(hand_vertices: np.ndarray, faces: np.ndarray, palm_ids: np.ndarray, mesh: trimesh.Trimesh,
                  voxels: np.ndarray, sim: DisplacementSimulator, pitch: float = VOXEL_PITCH,
-                 object_pose: np.ndarray | None = None, progress: bool = False) -> dict[str, np.ndarray]:
+                 object_pose: np.ndarray | None = None, progress: bool = False,
+                 robust: RobustSDSettings | None = None, robust_rngs: list[np.random.Generator] | None = None
+                 ) -> dict[str, np.ndarray]:
     """PV (m^3), SD (m) and the contact distance (m) of S hands around one object: the one protocol the
-    prior grasps and the evaluation share.
+    prior grasps and the evaluation share; with ``robust`` (perturbations > 0) also ``"sd_perturbed"``,
+    (S, K) SDs under perturbed starts (:func:`perturbed_displacements`), NaN rows for the hands past
+    ``robust.grasps_per_config``; ``robust_rngs`` one generator per hand.
 
     Args:
         hand_vertices: (S, V, 3) hands in the frame the object stands at ``object_pose`` in, m.
@@ -225,4 +276,16 @@ def hand_quality(hand_vertices: np.ndarray, faces: np.ndarray, palm_ids: np.ndar
 
         it = tqdm(it, desc="SD", mininterval=5.0)
     sd = np.array([sim.displacement(hand_vertices[i], faces, object_pose=pose, gravity=gravity[i]) for i in it])
-    return {"pv": pv, "sd": sd, "contact_distance": cd}
+    out = {"pv": pv, "sd": sd, "contact_distance": cd}
+    if robust is not None and robust.perturbations > 0:
+        s = len(hand_vertices)
+        if robust_rngs is None or len(robust_rngs) != s:
+            got = None if robust_rngs is None else len(robust_rngs)
+            raise ValueError(f"robust SD needs one generator per hand ({s}), got {got}")
+        n = s if robust.grasps_per_config == 0 else min(s, robust.grasps_per_config)
+        perturbed = np.full((s, robust.perturbations), np.nan)
+        for i in range(n):
+            perturbed[i] = perturbed_displacements(sim, hand_vertices[i], faces, robust, robust_rngs[i], pose,
+                                                   gravity[i])
+        out["sd_perturbed"] = perturbed
+    return out

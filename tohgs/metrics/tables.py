@@ -19,7 +19,16 @@ goal_opp       hand vertices inside the goal scene, %
 ts             task success ``QR x (1 - InitOPP) x (1 - GoalOPP)`` from the averages
 grasps         grasps evaluated; ``configs``: configurations they came from
 discarded      grasps the method discarded (a filter's, F-GraspTTA's): not evaluated, not in the others
+sd_robust      robust SD, cm: the mean over the grasps with perturbed SDs of their median
+sd_pass        %: the mean over those grasps of the fraction of perturbed SDs under ``max_sd``
+sd_unstable    %: those grasps whose verdicts (SD < ``max_sd``: the protocol's and the perturbed) differ
 =============  =================================================================================
+
+With several seeds (``seeds``) every cell pools their grasps, and ``qr_seed_sd`` and ``ts_seed_sd`` give the
+standard deviation across the seeds of QR and TS computed per seed.
+
+The robust-SD columns (``evaluation.robust_sd``, :class:`tohgs.metrics.quality.RobustSDSettings`) are NaN
+for a method evaluated without perturbations.
 
 Every metric is of the kept grasps. A method that kept none has every metric 0 with its count of
 discarded grasps, as the paper's F-GraspTTA Stacking row. A table may list ``pending`` rows, methods that
@@ -38,14 +47,16 @@ import numpy as np
 import pandas as pd
 
 from tohgs.metrics.bootstrap import (INTERVAL_COLUMNS, BootstrapSettings, config_keys, config_stats, intervals,
-                                     resample_weights)
+                                     resample_weights, robust_stats)
 
+SEED_SPREAD_COLUMNS = ("qr", "ts")  # the columns whose spread across seeds the tables add
 METRIC_COLUMNS = ("pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "init_opp", "goal_opp", "ts", "grasps",
-                  "configs", "discarded")
+                  "configs", "discarded", "sd_robust", "sd_pass", "sd_unstable")
 _HEADERS = {"task": "Task", "method": "Method", "pv_avg": "PV avg (cm³)", "pv_std": "PV std", "sd_avg": "SD avg (cm)",
             "sd_std": "SD std", "cr": "CR %", "qr": "QR %", "ds": "DS", "init_opp": "Init OPP %",
             "goal_opp": "Goal OPP %", "ts": "TS", "grasps": "grasps", "configs": "configs",
-            "discarded": "discarded"}
+            "discarded": "discarded", "sd_robust": "robust SD (cm)", "sd_pass": "SD pass %",
+            "sd_unstable": "SD unstable %", "qr_seed_sd": "QR sd (seeds)", "ts_seed_sd": "TS sd (seeds)"}
 
 
 @dataclass(frozen=True)
@@ -75,31 +86,62 @@ def summarize(frame: pd.DataFrame, t: QualityThresholds) -> dict[str, float]:
         discarded = 0
     n = len(frame)
     if n == 0:
-        out = {k: float("nan") if discarded == 0 else 0.0 for k in METRIC_COLUMNS}
+        out = {k: float("nan") if discarded == 0 or k.startswith("sd_") and k not in ("sd_avg", "sd_std") else 0.0
+               for k in METRIC_COLUMNS}
         out.update(grasps=0, configs=0, discarded=discarded)
         return out
     qr = quality_ratio(frame, t)
     init_opp, goal_opp = float(frame.init_opp.mean()), float(frame.goal_opp.mean())
-    ds = frame.groupby(["object", "config_index"]).ds.first()
-    return {"pv_avg": float(frame.pv.mean() * 1e6), "pv_std": float(frame.pv.std(ddof=0) * 1e6),
+    ds = _config_ds(frame)
+    configs = len(frame[["object", "config_index"]].drop_duplicates())
+    rob = robust_stats(frame, t.max_sd)
+    robust = ({"sd_robust": float(rob.sd_robust.mean() * 100), "sd_pass": float(rob.sd_pass.mean() * 100),
+               "sd_unstable": float(rob.sd_unstable.mean() * 100)} if len(rob) else
+              dict.fromkeys(("sd_robust", "sd_pass", "sd_unstable"), float("nan")))
+    return {**robust, "pv_avg": float(frame.pv.mean() * 1e6), "pv_std": float(frame.pv.std(ddof=0) * 1e6),
             "sd_avg": float(frame.sd.mean() * 100), "sd_std": float(frame.sd.std(ddof=0) * 100),
             "cr": float((frame.pv > 0).mean() * 100), "qr": qr, "ds": float(ds.mean()),
             "init_opp": init_opp * 100, "goal_opp": goal_opp * 100,
-            "ts": qr / 100 * (1 - init_opp) * (1 - goal_opp), "grasps": n, "configs": len(ds), "discarded": discarded}
+            "ts": qr / 100 * (1 - init_opp) * (1 - goal_opp), "grasps": n, "configs": configs, "discarded": discarded}
 
 
-def read_metrics(paths: list[str | Path]) -> pd.DataFrame:
-    """The rows of several metric files, concatenated (a missing column names the file)."""
-    from tohgs.metrics.evaluate import COLUMNS
+def read_metrics(paths: list[str | Path], replicas: dict[str, dict[str, int]] | None = None) -> pd.DataFrame:
+    """The rows of several metric files, concatenated (a missing column names the file).
 
+    ``replicas`` (a method -> its seed replicas' names -> their seeds, :func:`tohgs.config.add_seed_replicas`):
+    a replica's rows are renamed to its method's and get its seed in column ``seed`` (the tables pool them);
+    rows of other methods get seed 0."""
+    from tohgs.metrics.evaluate import COLUMNS, OPTIONAL_COLUMNS
+
+    rename = {r: (m, seed) for m, reps in (replicas or {}).items() for r, seed in reps.items()}
     frames = []
     for p in paths:
         f = pd.read_parquet(p)
-        missing = set(COLUMNS) - set(f.columns)
+        missing = set(COLUMNS) - set(OPTIONAL_COLUMNS) - set(f.columns)
         if missing:
             raise ValueError(f"{p}: metric file lacks columns {sorted(missing)}")
+        if len(f):
+            method, seed = rename.get(str(f.method.iloc[0]), (str(f.method.iloc[0]), 0))
+            f = f.assign(method=method, seed=seed)
         frames.append(f)
-    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=list(COLUMNS))
+    return (pd.concat(frames, ignore_index=True) if frames else
+            pd.DataFrame(columns=[*COLUMNS, "seed"]))
+
+
+def _config_ds(frame: pd.DataFrame) -> pd.Series:
+    """DS per configuration (object, config_index) and, with several seeds, per seed."""
+    keys = ["object", "config_index"] + (["seed"] if "seed" in frame.columns else [])
+    return frame.groupby(keys).ds.first()
+
+
+def seed_spread(frame: pd.DataFrame, t: QualityThresholds, columns: list[str]) -> dict[str, float]:
+    """The standard deviation across seeds (ddof 1) of each of ``columns`` computed per seed
+    (:func:`summarize`); NaN with fewer than two seeds."""
+    seeds = sorted(frame.seed.unique()) if "seed" in frame.columns and len(frame) else []
+    if len(seeds) < 2:
+        return dict.fromkeys(columns, float("nan"))
+    per = [summarize(frame[frame.seed == s], t) for s in seeds]
+    return {c: float(np.std([p[c] for p in per], ddof=1)) for c in columns}
 
 
 def metric_table(rows: pd.DataFrame, tasks: list[str], methods: list[str], labels: dict[str, str],
@@ -109,12 +151,16 @@ def metric_table(rows: pd.DataFrame, tasks: list[str], methods: list[str], label
     then per task a row of NaN for each label of ``pending`` (methods not available yet). With a
     ``bootstrap`` of samples > 0, the intervals ``<c>_lo``, ``<c>_hi`` of the columns that have them; the
     resamples are drawn once per task, over every configuration of the task's rows, and shared by its
-    methods."""
+    methods. Rows of several seeds (column ``seed``, :func:`read_metrics`) are pooled, and QR's and TS's
+    standard deviation across the seeds is added as ``qr_seed_sd`` and ``ts_seed_sd``."""
     unknown = [c for c in columns if c not in METRIC_COLUMNS]
     if unknown:
         raise ValueError(f"unknown table columns {unknown} (known: {', '.join(METRIC_COLUMNS)})")
     ci = [c for c in columns if c in INTERVAL_COLUMNS] if bootstrap is not None and bootstrap.samples > 0 else []
     bounds = [f"{c}_{end}" for c in ci for end in ("lo", "hi")]
+    several = "seed" in rows.columns and rows.seed.nunique() > 1
+    spread = [c for c in columns if c in SEED_SPREAD_COLUMNS] if several else []
+    bounds += [f"{c}_seed_sd" for c in spread]
     out = []
     for task in tasks:
         in_task = rows[rows.task == task]
@@ -130,6 +176,8 @@ def metric_table(rows: pd.DataFrame, tasks: list[str], methods: list[str], label
                 iv = intervals(weights, config_stats(sel, keys, t.max_pv, t.max_sd), bootstrap.level)
                 for c in ci:
                     row[f"{c}_lo"], row[f"{c}_hi"] = iv[c]
+            if spread:
+                row.update({f"{c}_seed_sd": v for c, v in seed_spread(sel, t, spread).items()})
             out.append(row)
         out += [{"task": task, "method": label, **dict.fromkeys([*columns, *bounds], float("nan"))} for label in pending]
     return pd.DataFrame(out, columns=["task", "method", *columns, *bounds])
@@ -164,7 +212,7 @@ def markdown(table: pd.DataFrame, digits: int = 3, notes: dict[str, str] | None 
             if c in ("grasps", "configs", "discarded"):
                 cells.append(str(int(v)) if np.isfinite(v) else "–")
             elif isinstance(v, (float, np.floating)):
-                fmt = f".{digits}f" if c in ("ts", "ds") else ".2f"
+                fmt = f".{digits}f" if c in ("ts", "ds", "ts_seed_sd") else ".2f"
                 text = "–" if not np.isfinite(v) else format(v, fmt)
                 if np.isfinite(v) and f"{c}_lo" in table.columns and np.isfinite(r[f"{c}_lo"]):
                     text += " ± " + format((r[f"{c}_hi"] - r[f"{c}_lo"]) / 2, fmt)

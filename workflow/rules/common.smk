@@ -13,7 +13,7 @@ if str(REPO) not in sys.path:  # parse time only; jobs import the installed pack
     sys.path.insert(0, str(REPO))
 
 from tohgs.code_inputs import code_inputs
-from tohgs.config import ConfigError, load_schema, method_setting_keys, validate_config
+from tohgs.config import ConfigError, add_seed_replicas, load_schema, method_setting_keys, validate_config
 from tohgs.assets.objects import check_split_sizes, read_catalog
 from tohgs.assets.sources import select_objects, task_set
 from tohgs.methods import method_components
@@ -198,9 +198,19 @@ def all_task_grasps(wildcards):
     return [f"results/grasps/task/{task}/{o}.zarr" for task in config["scenes"]["tasks"] for o in accepted_objects(task)]
 
 
+# The seed replicas (config key seeds): every table row's method, and what it builds on, once per seed
+# but the first, as components and methods of their own (tohgs.config.add_seed_replicas).
+REPLICAS = add_seed_replicas(config, [m for t in config["tables"].values() for m in t["rows"]])
+SEED_OF = {r: seed for reps in REPLICAS.values() for r, seed in zip(reps, config["seeds"])}
+BASE_OF = {r: m for m, reps in REPLICAS.items() for r in reps}
 COMPONENTS = config["components"]
 METHODS = config["methods"]
 TABLES = config["tables"]
+
+
+def replicas_of(methods):
+    """The methods with their seed replicas, each a map to its seed: the tables' and claims' param."""
+    return {m: {r: SEED_OF[r] for r in REPLICAS.get(m, [m])} for m in methods}
 
 
 def _names(names):
@@ -264,6 +274,16 @@ def method_block(wildcards):
     return _canonical({k: v for k, v in METHODS[wildcards.method].items() if k != "label"})
 
 
+def robust_sd_settings(wildcards):
+    """Robust SD's settings for the method's evaluation: ``evaluation.robust_sd`` without its method list
+    for a listed method; ``perturbations: 0`` (none) for the others, so their jobs do not rerun when the
+    list or the perturbations change."""
+    block = config["evaluation"]["robust_sd"]
+    if BASE_OF.get(wildcards.method, wildcards.method) not in block["methods"]:
+        return {"perturbations": 0}
+    return _canonical({k: v for k, v in block.items() if k != "methods"})
+
+
 def method_models(wildcards):
     """The checkpoints of the method's components for the task."""
     return [f"results/models/{wildcards.task}/{c}.pt" for c in components_of(wildcards.method)]
@@ -313,8 +333,8 @@ def all_test_shards(wildcards):
 
 def table_metrics(wildcards):
     """Every task's metric file of every row of the table."""
-    return [f"results/metrics/{task}/{m}.parquet" for task in config["scenes"]["tasks"]
-            for m in TABLES[wildcards.table]["rows"]]
+    return [f"results/metrics/{task}/{r}.parquet" for task in config["scenes"]["tasks"]
+            for m in TABLES[wildcards.table]["rows"] for r in REPLICAS[m]]
 
 
 def claims_methods():
@@ -324,7 +344,8 @@ def claims_methods():
 
 def claims_metrics(wildcards):
     """Every task's metric file of every method the claims compare."""
-    return [f"results/metrics/{task}/{m}.parquet" for task in config["scenes"]["tasks"] for m in claims_methods()]
+    return [f"results/metrics/{task}/{r}.parquet" for task in config["scenes"]["tasks"] for m in claims_methods()
+            for r in REPLICAS[m]]
 
 
 def claims_outputs():

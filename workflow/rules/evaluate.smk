@@ -17,6 +17,7 @@ rule evaluate:
         sd=setting("metrics", "sd"),
         voxel_pitch=setting("metrics", "voxel_pitch"),
         cache_dir=setting("cache_dir"),
+        robust_sd=robust_sd_settings,
     threads: config["evaluation"]["threads"]
     conda:
         "../envs/tohgs.yaml"
@@ -42,6 +43,7 @@ rule table:
         labels=lambda w: {m: TABLES[w.table]["labels"].get(m, METHODS[m]["label"]) for m in TABLES[w.table]["rows"]},
         pending=lambda w: setting("tables", w.table, "pending"),
         columns=lambda w: setting("tables", w.table, "columns"),
+        replicas=lambda w: replicas_of(TABLES[w.table]["rows"]),
         qr=setting("evaluation", "qr"),
         qr_grid=setting("evaluation", "qr_grid"),
         bootstrap=setting("evaluation", "bootstrap"),
@@ -65,6 +67,7 @@ rule claims:
         claims=setting("claims"),
         tables=lambda w: {name: {"rows": t["rows"]} for name, t in sorted(TABLES.items())},
         labels=lambda w: {m: METHODS[m]["label"] for m in claims_methods()},
+        replicas=lambda w: replicas_of(claims_methods()),
         qr=setting("evaluation", "qr"),
         bootstrap=setting("evaluation", "bootstrap"),
     conda:

@@ -12,7 +12,8 @@ from tohgs.metrics.tables import QualityThresholds, read_metrics  # noqa: E402
 
 p, out = snakemake.params, snakemake.output
 boot = BootstrapSettings(**p.bootstrap)
-table = claims_table(read_metrics(snakemake.input.metrics), p.claims, p.tables, p.labels, QualityThresholds(**p.qr),
+rows = read_metrics(snakemake.input.metrics, p.replicas)
+table = claims_table(rows, p.claims, p.tables, p.labels, QualityThresholds(**p.qr),
                      boot, list(p.tasks))
 with atomic_path(out.csv) as tmp:
     table.to_csv(tmp, index=False, float_format="%.6g")

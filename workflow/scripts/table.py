@@ -10,7 +10,7 @@ from tohgs.metrics.bootstrap import BootstrapSettings  # noqa: E402
 from tohgs.metrics.tables import QualityThresholds, markdown, metric_table, qr_grid, read_metrics  # noqa: E402
 
 p, out = snakemake.params, snakemake.output
-rows = read_metrics(snakemake.input.metrics)
+rows = read_metrics(snakemake.input.metrics, p.replicas)
 pending = {row["label"]: row["reason"] for row in p.pending}
 table = metric_table(rows, p.tasks, p.rows, p.labels, p.columns, QualityThresholds(**p.qr), list(pending),
                      BootstrapSettings(**p.bootstrap))
