@@ -531,6 +531,90 @@ def test_a_second_seed_adds_replicas_and_the_table_pools_them(smoke_run):
     assert _stale_jobs(smoke_run) == {}
 
 
+def _dry_run_jobs(text: str) -> list[tuple[str, dict[str, str]]]:
+    """(rule, resources) of every job a dry run printed."""
+    jobs = []
+    for block in re.split(r"\n\s*\[[^\]]+\][^\n]*\n", text):  # a group's member jobs are indented
+        rule = re.search(r"^\s*(?:local)?rule (\w+):", block, re.M)
+        res = re.search(r"^\s+resources: (.+)$", block, re.M)
+        if rule and res:
+            jobs.append((rule.group(1), dict(kv.split("=", 1) for kv in res.group(1).split(", "))))
+    return jobs
+
+
+# The resource names a profile's default-resources may set (Snakemake's standard ones and the SLURM
+# plugin's): a misspelt one would be passed on silently, so the test below refuses it.
+KNOWN_RESOURCES = {"mem_mb", "runtime", "disk_mb", "tmpdir", "cpus_per_task", "gpu", "gpu_model", "gpu_manufacturer",
+                   "slurm_partition", "slurm_account", "constraint", "qos", "nodes", "tasks", "slurm_extra"}
+
+
+def _profile_dry_run(workdir: Path, profile: str, *args: str) -> str:
+    cmd = [sys.executable, "-m", "snakemake", *args, "-n", "--workflow-profile", f"profiles/{profile}"]
+    # no stdin: with a terminal's the executor plugins' dry run waits on it
+    out = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=600, env=_env(workdir),
+                         stdin=subprocess.DEVNULL)
+    assert out.returncode == 0, (out.stdout + out.stderr)[-3000:]
+    return out.stdout + out.stderr
+
+
+def _check_profile_file(profile: str) -> dict:
+    prof = yaml.safe_load((REPO / "profiles" / profile / "profile.yaml").read_text())
+    assert set(prof["default-resources"]) <= KNOWN_RESOURCES, set(prof["default-resources"]) - KNOWN_RESOURCES
+    assert "cores" not in prof  # the laptop default's key: a cluster runs as many jobs as `jobs` allows
+    return prof
+
+
+def test_the_slurm_profile_dry_runs_with_each_rules_resources_and_groups(smoke_run):
+    """The profile and the SLURM plugin parse (a misspelt option fails the dry run); the heavy rules ask
+    for the config's mem_mb and runtime, the torch rules for a GPU only where the config asks for one
+    (never gpu=0); the small per-object jobs run in groups."""
+    pytest.importorskip("snakemake_executor_plugin_slurm")
+    prof = _check_profile_file("slurm")
+    (smoke_run / "gpu.yaml").write_text(yaml.safe_dump({"resources": {"gpu": True}}))
+    cfg = _smoke_config(smoke_run)
+
+    def jobs(*configs):
+        text = _profile_dry_run(smoke_run, "slurm", "all", "--configfile", ".test/config/config.yaml", *configs,
+                                "--forcerun", "scenes", "prior_synthesis")
+        by_rule: dict[str, list[dict[str, str]]] = {}
+        for rule, res in _dry_run_jobs(text):
+            by_rule.setdefault(rule, []).append(res)
+        return text, by_rule
+
+    text, by_rule = jobs()
+    for rule in ("scenes", "prior_synthesis", "prior_filter", "task_grasps", "maps", "train", "predict", "evaluate"):
+        want = cfg["resources"]["rules"][rule]
+        assert rule in by_rule, sorted(by_rule)
+        for res in by_rule[rule]:
+            assert int(res["mem_mb"]) == want["mem_mb"] and int(res["runtime"]) == want["runtime"], (rule, res)
+            assert "gpu" not in res, (rule, res)
+    assert int(by_rule["table"][0]["mem_mb"]) == prof["default-resources"]["mem_mb"]  # a light rule: the profile's
+    assert {"scenes", "prior_filter", "task_grasps"} <= set(re.findall(r"Group job (\w+) ", text))
+    _, with_gpu = jobs("gpu.yaml")
+    for rule, res in ((r, x) for r, xs in with_gpu.items() for x in xs):
+        if rule in ("prior_synthesis", "train", "predict"):
+            assert res.get("gpu") == "1" and res.get("gpu_manufacturer") == "nvidia", (rule, res)
+        else:
+            assert "gpu" not in res, (rule, res)
+
+
+def test_the_kubernetes_profile_dry_runs_with_its_storage_and_groups(smoke_run):
+    """The profile, the plugin and its storage provider parse; the objects' jobs get their resources and run
+    in groups. (A dry run with remote storage stops at the catalog checkpoint: its output has not been
+    fetched, so the later rules' resources are checked with the SLURM profile; they are the workflow's.)"""
+    pytest.importorskip("snakemake_executor_plugin_kubernetes")
+    pytest.importorskip("snakemake_storage_plugin_fs")
+    _check_profile_file("kubernetes")
+    cfg = _smoke_config(smoke_run)
+    text = _profile_dry_run(smoke_run, "kubernetes", "results/objects/catalog.csv", "--configfile",
+                            ".test/config/config.yaml", "--forcerun", "prepare_object",
+                            "--default-storage-prefix", str(smoke_run))  # the run's folder as the 'volume'
+    objects = [res for rule, res in _dry_run_jobs(text) if rule == "prepare_object"]
+    want = cfg["resources"]["rules"]["prepare_object"]
+    assert objects and all(int(r["mem_mb"]) == want["mem_mb"] and int(r["runtime"]) == want["runtime"] for r in objects)
+    assert "Group job objects " in text
+
+
 def test_the_code_inputs_are_derived_from_the_imports(tmp_path):
     """The modules a script reaches through others count (task expansion reads the hand's assets and the
     supports; a prediction loads its method's and its components' kinds by name), and so do lazy imports."""

@@ -274,6 +274,19 @@ def method_block(wildcards):
     return _canonical({k: v for k, v in METHODS[wildcards.method].items() if k != "label"})
 
 
+TORCH_RULES = ("prior_synthesis", "train", "predict")  # the rules that can run on a GPU
+
+
+def rule_resources(name):
+    """The cluster resources of the jobs of ``name``, a rule, from config ``resources``: its ``mem_mb`` and
+    ``runtime``, and for the torch rules one GPU when the config asks for one (no ``gpu`` key otherwise,
+    since the kubernetes plugin reads ``gpu=0`` as a request)."""
+    r = dict(config["resources"]["rules"][name])
+    if name in TORCH_RULES and config["resources"]["gpu"]:
+        r.update(gpu=1, gpu_manufacturer=config["resources"]["gpu_manufacturer"])
+    return r
+
+
 def robust_sd_settings(wildcards):
     """Robust SD's settings for the method's evaluation: ``evaluation.robust_sd`` without its method list
     for a listed method; ``perturbations: 0`` (none) for the others, so their jobs do not rerun when the

@@ -15,6 +15,8 @@ rule task_grasps:
         code=code("task_grasps.py"),
         objects_dir=objects_dir_of_supports,
         settings=setting("task_grasps"),
+    resources:
+        **rule_resources("task_grasps"),
     conda:
         "../envs/tohgs.yaml"
     log:
@@ -39,6 +41,8 @@ rule maps:
         n_shards=lambda w: config["maps"]["shards"][w.split],
         test_configs=setting("maps", "test_configs"),
         seed=setting("seed"),
+    resources:
+        **rule_resources("maps"),
     conda:
         "../envs/tohgs.yaml"
     log:

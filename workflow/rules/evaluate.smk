@@ -19,6 +19,8 @@ rule evaluate:
         cache_dir=setting("cache_dir"),
         robust_sd=robust_sd_settings,
     threads: config["evaluation"]["threads"]
+    resources:
+        **rule_resources("evaluate"),
     conda:
         "../envs/tohgs.yaml"
     log:

@@ -19,6 +19,8 @@ rule prior_synthesis:
         seed=setting("seed"),
         cache_dir=setting("cache_dir"),
     threads: config["prior_grasps"]["threads"]
+    resources:
+        **rule_resources("prior_synthesis"),
     conda:
         "../envs/tohgs.yaml"
     log:
@@ -37,6 +39,8 @@ rule prior_filter:
     params:
         code=code("prior_filter.py"),
         thresholds=setting("prior_grasps", "filter"),
+    resources:
+        **rule_resources("prior_filter"),
     conda:
         "../envs/tohgs.yaml"
     log:

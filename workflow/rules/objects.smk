@@ -14,6 +14,8 @@ rule prepare_object:
         density=setting("objects", "density"),
         decomposition=setting("objects", "decomposition"),
         cache_dir=setting("cache_dir"),
+    resources:
+        **rule_resources("prepare_object"),
     conda:
         "../envs/tohgs.yaml"
     log:

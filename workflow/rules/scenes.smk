@@ -13,6 +13,8 @@ rule scenes:
         objects_dir=objects_dir_of_supports,
         settings=scene_settings,
         seed=setting("seed"),
+    resources:
+        **rule_resources("scenes"),
     conda:
         "../envs/tohgs.yaml"
     log:

@@ -15,7 +15,7 @@ rule train:
         settings=component_settings,
     threads: config["training"]["threads"]
     resources:
-        gpu=1,  # a hint for cluster executors; local runs ignore resources they are not given
+        **rule_resources("train"),
     conda:
         "../envs/tohgs.yaml"
     log:
@@ -39,6 +39,8 @@ rule predict:
         method=method_block,
         settings=method_settings,
     threads: config["prediction"]["threads"]
+    resources:
+        **rule_resources("predict"),
     conda:
         "../envs/tohgs.yaml"
     log:
