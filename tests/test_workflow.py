@@ -567,7 +567,7 @@ def _check_profile_file(profile: str) -> dict:
 def test_the_slurm_profile_dry_runs_with_each_rules_resources_and_groups(smoke_run):
     """The profile and the SLURM plugin parse (a misspelt option fails the dry run); the heavy rules ask
     for the config's mem_mb and runtime, the torch rules for a GPU only where the config asks for one
-    (never gpu=0); the small per-object jobs run in groups."""
+    (never gpu=0); the objects' small jobs run in groups."""
     pytest.importorskip("snakemake_executor_plugin_slurm")
     prof = _check_profile_file("slurm")
     (smoke_run / "gpu.yaml").write_text(yaml.safe_dump({"resources": {"gpu": True}}))
@@ -589,7 +589,10 @@ def test_the_slurm_profile_dry_runs_with_each_rules_resources_and_groups(smoke_r
             assert int(res["mem_mb"]) == want["mem_mb"] and int(res["runtime"]) == want["runtime"], (rule, res)
             assert "gpu" not in res, (rule, res)
     assert int(by_rule["table"][0]["mem_mb"]) == prof["default-resources"]["mem_mb"]  # a light rule: the profile's
-    assert {"scenes", "prior_filter", "task_grasps"} <= set(re.findall(r"Group job (\w+) ", text))
+    assert not re.findall(r"Group job (\w+) ", text)  # after the catalog nothing is grouped (the profile says why)
+    objects = _profile_dry_run(smoke_run, "slurm", "results/objects/catalog.csv", "--configfile",
+                               ".test/config/config.yaml", "--forcerun", "prepare_object")
+    assert "Group job objects " in objects
     _, with_gpu = jobs("gpu.yaml")
     for rule, res in ((r, x) for r, xs in with_gpu.items() for x in xs):
         if rule in ("prior_synthesis", "train", "predict"):
