@@ -550,7 +550,7 @@ KNOWN_RESOURCES = {"mem_mb", "runtime", "disk_mb", "tmpdir", "cpus_per_task", "g
 
 def _profile_dry_run(workdir: Path, profile: str, *args: str) -> str:
     cmd = [sys.executable, "-m", "snakemake", *args, "-n", "--workflow-profile", f"profiles/{profile}"]
-    # no stdin: with a terminal's the executor plugins' dry run waits on it
+    # no stdin: a dry run reads none, and an inherited terminal is not the test's to share
     out = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=600, env=_env(workdir),
                          stdin=subprocess.DEVNULL)
     assert out.returncode == 0, (out.stdout + out.stderr)[-3000:]
