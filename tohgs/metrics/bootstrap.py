@@ -64,6 +64,12 @@ def config_keys(frame: pd.DataFrame) -> pd.DataFrame:
     return frame[["object", "config_index"]].drop_duplicates().sort_values(["object", "config_index"]).reset_index(drop=True)
 
 
+def config_ds(frame: pd.DataFrame) -> pd.Series:
+    """DS per configuration (object, config_index) and, for rows of several seeds (column ``seed``,
+    :func:`tohgs.metrics.tables.read_metrics`), per seed: each (configuration, seed)'s first row's."""
+    return frame.groupby(["object", "config_index"] + (["seed"] if "seed" in frame.columns else [])).ds.first()
+
+
 def config_stats(frame: pd.DataFrame, keys: pd.DataFrame, max_pv: float, max_sd: float) -> np.ndarray:
     """(C, 15) per configuration of ``keys``: kept grasps n, the sums of PV, PV^2, SD, SD^2 (SI units), the
     counts in contact (PV > 0) and of quality (PV < max_pv and SD < max_sd), the sums of the two OPPs
@@ -77,9 +83,7 @@ def config_stats(frame: pd.DataFrame, keys: pd.DataFrame, max_pv: float, max_sd:
     f = frame.assign(pv2=frame.pv**2, sd2=frame.sd**2, contact=(frame.pv > 0).astype(float),
                      quality=((frame.pv < max_pv) & (frame.sd < max_sd)).astype(float))
     g = f.groupby(["object", "config_index"])
-    # DS per configuration and seed (rows of several seeds pooled, tohgs.metrics.tables.read_metrics)
-    ds = f.groupby(["object", "config_index"] + (["seed"] if "seed" in f.columns else [])).ds.first()
-    ds_g = ds.groupby(level=["object", "config_index"])
+    ds_g = config_ds(f).groupby(level=["object", "config_index"])
     agg = pd.DataFrame({"n": g.size(), "pv": g.pv.sum(), "pv2": g.pv2.sum(), "sd": g.sd.sum(), "sd2": g.sd2.sum(),
                         "contact": g.contact.sum(), "quality": g.quality.sum(), "init_opp": g.init_opp.sum(),
                         "goal_opp": g.goal_opp.sum(), "ds": ds_g.sum(), "has_ds": ds_g.count().astype(float)})

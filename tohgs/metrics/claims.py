@@ -49,8 +49,7 @@ def objects_needed(keys: pd.DataFrame, difference, bootstrap: BootstrapSettings,
         d = d[np.isfinite(d)]
         if len(d) == 0:
             return float("nan")
-        lo, hi = np.percentile(d, [tail, 100 - tail])
-        if lo > 0 or hi < 0:
+        if verdict(*np.percentile(d, [tail, 100 - tail])) != "cannot tell":
             return float(scale * k)
     return float("nan")
 
@@ -109,11 +108,12 @@ def claim_rows(rows: pd.DataFrame, name: str, claim: dict, table_rows: list[str]
         tail = (1 - bootstrap.level) / 2 * 100
         boot = diff[1:][np.isfinite(diff[1:])]
         lo, hi = (np.percentile(boot, [tail, 100 - tail]) if len(boot) and bootstrap.samples > 0 else (np.nan, np.nan))
+        told = verdict(lo, hi)
         out.append({"claim": name, "text": claim.get("text", ""), "task": task, "metric": metric,
                     "better": labels.get(better, better), "than": ", ".join(labels.get(m, m) for m in than),
-                    "difference": float(diff[0]), "lo": float(lo), "hi": float(hi), "verdict": verdict(lo, hi),
+                    "difference": float(diff[0]), "lo": float(lo), "hi": float(hi), "verdict": told,
                     "objects": int(keys.object.nunique()),
-                    "objects_needed": needed(keys, difference, verdict(lo, hi), bootstrap, diff[0],
+                    "objects_needed": needed(keys, difference, told, bootstrap, diff[0],
                                              [bootstrap.seed, tasks.index(task), 11])})
     return out
 

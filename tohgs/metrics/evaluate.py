@@ -23,6 +23,7 @@ The table-level numbers (CR, QR, TS and the QR grid) are computed from these row
 from __future__ import annotations
 
 import logging
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -105,8 +106,6 @@ def grasp_metrics(verts_init: np.ndarray, verts_goal: np.ndarray, faces: np.ndar
 def grasp_rng(seed: int, obj: str, config_index: int, sample: int) -> np.random.Generator:
     """The generator of one grasp's robust-SD perturbations: from the seed and the grasp's identity (its
     object's name, configuration and sample), so the draws do not depend on what else is evaluated."""
-    import zlib
-
     return np.random.default_rng([int(seed), zlib.crc32(obj.encode()), int(config_index), int(sample)])
 
 

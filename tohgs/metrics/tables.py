@@ -46,8 +46,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tohgs.metrics.bootstrap import (INTERVAL_COLUMNS, BootstrapSettings, config_keys, config_stats, intervals,
-                                     resample_weights, robust_stats)
+from tohgs.metrics.bootstrap import (INTERVAL_COLUMNS, BootstrapSettings, config_ds, config_keys, config_stats,
+                                     intervals, resample_weights, robust_stats)
 
 SEED_SPREAD_COLUMNS = ("qr", "ts")  # the columns whose spread across seeds the tables add
 METRIC_COLUMNS = ("pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "init_opp", "goal_opp", "ts", "grasps",
@@ -92,7 +92,7 @@ def summarize(frame: pd.DataFrame, t: QualityThresholds) -> dict[str, float]:
         return out
     qr = quality_ratio(frame, t)
     init_opp, goal_opp = float(frame.init_opp.mean()), float(frame.goal_opp.mean())
-    ds = _config_ds(frame)
+    ds = config_ds(frame)
     configs = len(frame[["object", "config_index"]].drop_duplicates())
     rob = robust_stats(frame, t.max_sd)
     robust = ({"sd_robust": float(rob.sd_robust.mean() * 100), "sd_pass": float(rob.sd_pass.mean() * 100),
@@ -126,12 +126,6 @@ def read_metrics(paths: list[str | Path], replicas: dict[str, dict[str, int]] | 
         frames.append(f)
     return (pd.concat(frames, ignore_index=True) if frames else
             pd.DataFrame(columns=[*COLUMNS, "seed"]))
-
-
-def _config_ds(frame: pd.DataFrame) -> pd.Series:
-    """DS per configuration (object, config_index) and, with several seeds, per seed."""
-    keys = ["object", "config_index"] + (["seed"] if "seed" in frame.columns else [])
-    return frame.groupby(keys).ds.first()
 
 
 def seed_spread(frame: pd.DataFrame, t: QualityThresholds, columns: list[str]) -> dict[str, float]:
