@@ -1,0 +1,356 @@
+"""The official TOHGS dataset: import a small synthetic tree in the official format, export predictions in the
+official evaluation's format, and compare (tohgs/data/official.py, docs/official_dataset.md)."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import pickle
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.spatial.transform import Rotation
+
+from tohgs.data.official import (NO_PRIOR, export_official, import_official, load_official_npy, safe_loads,
+                                 shift_grasp, to_official_pose)
+from tohgs.data.predictions import write_predictions
+from tohgs.data.scenes import read_scenes
+from tohgs.data.task_grasps import read_task_grasps
+from tohgs.geometry.grasp import pose_matrix, transform_grasp
+from tohgs.hand import load_hand_assets
+
+DS = "task_oriented_grasps_dataset"
+TABLE_TOP = 0.6 + 0.025  # a unit cube centred on the origin, scaled by 0.05 in z and put at z = 0.6
+
+
+@pytest.fixture(scope="module")
+def hand():
+    return load_hand_assets("anny")
+
+
+# --- the synthetic official tree ------------------------------------------------------------------------
+
+def _write_boxes(path: Path, boxes: list[tuple[tuple[float, float, float], tuple[float, float, float]]]) -> None:
+    """An OBJ of axis-aligned boxes ``(centre, size)``, one ``o`` group each (CoACD's layout)."""
+    import trimesh
+
+    lines, offset = [], 1
+    for k, (centre, size) in enumerate(boxes):
+        m = trimesh.creation.box(extents=size)
+        m.apply_translation(centre)
+        lines.append(f"o convex_{k}")
+        lines += [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in m.vertices]
+        lines += [f"f {a + offset} {b + offset} {c + offset}" for a, b, c in m.faces]
+        offset += len(m.vertices)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _pose(rng: np.random.Generator, z: float = TABLE_TOP + 0.05) -> np.ndarray:
+    q = Rotation.from_euler("z", rng.uniform(-np.pi, np.pi)).as_quat()
+    return np.r_[rng.uniform(-0.4, 0.4, 2), z, q]
+
+
+def _grasp(rng: np.random.Generator, near: np.ndarray) -> np.ndarray:
+    g = np.r_[near[:3] + rng.normal(0, 0.05, 3), rng.normal(0, 0.8, 3), rng.normal(0, 0.2, 45)]
+    return g.reshape(1, 51).astype(np.float32)
+
+
+def _save_npy(path: Path, d: dict) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.save(path, d, allow_pickle=True)  # what the official code reads with np.load(...).item()
+
+
+def _write_json(path: Path, d: dict) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(d))
+
+
+@pytest.fixture(scope="module")
+def tree(tmp_path_factory) -> dict:
+    """The official layout: 2 Placing objects (one corrupt .npy besides), 1 Shelving object (one file with
+    unequal list lengths besides), 3 Stacking bricks; meshes, lists, .npy grasp files and test JSONs."""
+    root = tmp_path_factory.mktemp("official")
+    rng = np.random.default_rng(0)
+    md = root / "models"
+    # mug_a: two overlapping parts, off-centre in its own frame; can_b: one box raised 5 cm; box_c: obstacle.
+    _write_boxes(md / "meshdata/mug_a/coacd/decomposed_scaled.obj",
+                 [((0.01, -0.02, 0.03), (0.06, 0.04, 0.08)), ((0.06, -0.02, 0.03), (0.04, 0.03, 0.03))])
+    _write_boxes(md / "meshdata/can_b/coacd/decomposed_scaled.obj", [((0.0, 0.0, 0.05), (0.05, 0.05, 0.1))])
+    _write_boxes(md / "meshdata/box_c/coacd/decomposed_scaled.obj", [((0.0, 0.0, 0.0), (0.08, 0.08, 0.08))])
+    for b in "ACF":
+        _write_boxes(md / f"brick/{b}/textured_simple.obj", [((0.0, 0.0, 0.0), (0.03, 0.06, 0.03))])
+    _write_boxes(md / "selected_shelf/shelf01/coacd/decomposed.obj",
+                 [((0, 0, 0.01), (0.6, 0.3, 0.02)), ((-0.29, 0, 0.2), (0.02, 0.3, 0.4)),
+                  ((0.29, 0, 0.2), (0.02, 0.3, 0.4)), ((0, 0, 0.39), (0.6, 0.3, 0.02))])
+    _write_boxes(md / "table/table.obj", [((0, 0, 0), (1.0, 1.0, 1.0))])
+
+    ds = root / DS
+    src: dict = {}
+    # Placing: mug_a rows 0 and 1 share their scene (one configuration, two grasps); can_b two scenes.
+    scene = [_pose(rng), _pose(rng), [_pose(rng).tolist()], ["box_c"]]
+    other = [_pose(rng), _pose(rng), [], []]
+    rows = [scene, scene, other]
+    src["placing/mug_a"] = {
+        "init_pose": [r[0] for r in rows], "goal_pose": [r[1] for r in rows],
+        "recon_param": [_grasp(rng, r[0]) for r in rows], "obstacle_pose": [r[2] for r in rows],
+        "obstacle_name": [r[3] for r in rows]}
+    src["placing/can_b"] = {
+        "init_pose": [_pose(rng), _pose(rng)], "goal_pose": [_pose(rng), _pose(rng)],
+        "recon_param": [_grasp(rng, np.zeros(3)), _grasp(rng, np.zeros(3))],
+        "obstacle_pose": [[_pose(rng).tolist(), _pose(rng).tolist()], []], "obstacle_name": [["box_c", "mug_a"], []]}
+    for key, d in src.items():
+        _save_npy(ds / f"{key}.npy", d)
+    (ds / "placing/broken.npy").write_bytes(b"\x93NUMPY\x01\x00v\x00{'descr': '|O', 'fortran_order': False, 'shap")
+    (ds / "placing/train.txt").write_text("mug_a.npy\nbroken.npy\n")
+    (ds / "placing/val.txt").write_text("can_b.npy\n")
+    test = {"grasped_obj_name": "can_b", "init_pose": [_pose(rng).tolist() for _ in range(3)],
+            "goal_pose": [_pose(rng).tolist() for _ in range(3)],
+            "obstacle_name": [["box_c"], [], ["mug_a", "box_c"]],
+            "obstacle_pose": [[_pose(rng).tolist()], [], [_pose(rng).tolist(), _pose(rng).tolist()]]}
+    _write_json(ds / "placing/test/can_b.json", test)
+    src["placing/test/can_b"] = test
+
+    # Shelving: shelf_name as 0-d string arrays (their loader calls .item()); uneven.npy has unequal lists.
+    shelf = np.r_[0.2, 0.1, TABLE_TOP, 0, 0, 0, 1.0]
+    src["shelving/mug_a"] = {
+        "init_pose": [_pose(rng, TABLE_TOP + 0.1) for _ in range(2)],
+        "goal_pose": [_pose(rng, TABLE_TOP + 0.3) for _ in range(2)],
+        "recon_param": [_grasp(rng, np.zeros(3)) for _ in range(2)], "obstacle_pose": [[_pose(rng).tolist()], []],
+        "obstacle_name": [["can_b"], []], "shelf_pose": [shelf, shelf], "shelf_name": [np.array("shelf01")] * 2}
+    _save_npy(ds / "shelving/mug_a.npy", src["shelving/mug_a"])
+    _save_npy(ds / "shelving/uneven.npy", {**src["shelving/mug_a"], "goal_pose": [_pose(rng)]})
+    (ds / "shelving/train.txt").write_text("uneven.npy\n")
+    (ds / "shelving/val.txt").write_text("mug_a.npy\n")
+    test = {"grasped_obj_name": ["mug_a", "mug_a"], "init_pose": [_pose(rng).tolist() for _ in range(2)],
+            "goal_pose": [_pose(rng).tolist() for _ in range(2)], "obstacle_name": [[], ["box_c"]],
+            "obstacle_pose": [[], [_pose(rng).tolist()]], "shelf_name": ["shelf01", "shelf01"],
+            "shelf_pose": [shelf.tolist(), shelf.tolist()]}
+    _write_json(ds / "shelving/test/mug_a.json", test)
+    src["shelving/test/mug_a"] = test
+
+    # Stacking: A and C train, F val (the hard-coded split); the key is recon_parms (sic).
+    def stack(base: str, target: str) -> list:
+        return [base, _pose(rng).tolist(), target, _pose(rng).tolist()]
+
+    for brick, base, n in (("A", "C", 2), ("C", "A", 1), ("F", "A", 1)):
+        init = [stack(base, brick) for _ in range(n)]
+        goal = [[e[0], e[1], brick, _pose(rng, TABLE_TOP + 0.1).tolist()] for e in init]
+        src[f"stacking/{brick}"] = {"init": init, "goal": goal,
+                                    "recon_parms": [_grasp(rng, np.asarray(e[3])) for e in init]}
+        _save_npy(ds / f"stacking/{brick}.npy", src[f"stacking/{brick}"])
+    test = {"init": [stack("A", "F") for _ in range(2)]}
+    test["goal"] = [[e[0], e[1], "F", _pose(rng, TABLE_TOP + 0.1).tolist()] for e in test["init"]]
+    _write_json(ds / "stacking/test/F.json", test)
+    src["stacking/test/F"] = test
+    return {"root": root, "src": src}
+
+
+@pytest.fixture(scope="module")
+def imported(tree, hand, tmp_path_factory) -> dict:
+    out = tmp_path_factory.mktemp("imported")
+    report = import_official(tree["root"], out, hand)
+    return {**tree, "out": out, "report": report}
+
+
+# --- the importer ---------------------------------------------------------------------------------------
+
+def test_counts(imported):
+    tasks = imported["report"].tasks
+    assert tasks["placing"] == {"files": 2, "rows": 5, "configurations": 4, "test_files": 1,
+                                "test_configurations": 3, "targets": 2}
+    assert tasks["shelving"] == {"files": 1, "rows": 2, "configurations": 2, "test_files": 1,
+                                 "test_configurations": 2, "targets": 1}
+    assert tasks["stacking"] == {"files": 3, "rows": 4, "configurations": 4, "test_files": 1,
+                                 "test_configurations": 2, "targets": 3}
+    assert imported["report"].objects == {"ok": 6, "rejected": 0}
+
+
+def test_bad_files_are_counted_and_named(imported):
+    report = imported["report"]
+    problems = {p["path"]: p for p in report.problems}
+    assert report.n_problems == 2
+    assert set(problems) == {f"{DS}/placing/broken.npy", f"{DS}/shelving/uneven.npy"}
+    assert problems[f"{DS}/placing/broken.npy"]["kind"] == "unreadable"
+    assert "unequal list lengths" in problems[f"{DS}/shelving/uneven.npy"]["reason"]
+    assert "goal_pose 1" in problems[f"{DS}/shelving/uneven.npy"]["reason"]
+    written = json.loads((imported["out"] / "import_report.json").read_text())
+    assert written["n_problems"] == 2 and {p["path"] for p in written["problems"]} == set(problems)
+
+
+def test_checksums_match_sha256(imported):
+    root, lines = imported["root"], (imported["out"] / "checksums.sha256").read_text().splitlines()
+    digests = dict(reversed(line.split("  ", 1)) for line in lines)
+    assert len(digests) == imported["report"].files_read
+    assert {f"{DS}/placing/mug_a.npy", f"{DS}/placing/broken.npy", f"{DS}/placing/train.txt",
+            f"{DS}/shelving/test/mug_a.json", "models/table/table.obj",
+            "models/meshdata/mug_a/coacd/decomposed_scaled.obj"} <= set(digests)
+    for rel, digest in digests.items():
+        assert digest == hashlib.sha256((root / rel).read_bytes()).hexdigest(), rel
+
+
+def _offsets(out: Path) -> dict:
+    return {p.parent.name: np.asarray(json.loads(p.read_text()).get("official_offset", [0, 0, 0]))
+            for p in (out / "objects").glob("*/meta.json")}
+
+
+def test_placing_scenes_and_grasps_equal_the_source(imported, hand):
+    src, out = imported["src"]["placing/mug_a"], imported["out"]
+    scenes = read_scenes(out / "scenes/placing/off-mug-a.zarr")
+    assert len(scenes) == 2 and scenes.attrs["official"]["index"] == [0, 2]
+    assert scenes.attrs["official"]["table_top"] == pytest.approx(TABLE_TOP)
+    off = _offsets(out)
+    assert off["off-mug-a"] == pytest.approx(np.average([[0.01, -0.02, 0.03], [0.06, -0.02, 0.03]], axis=0,
+                                                        weights=[0.06 * 0.04 * 0.08, 0.04 * 0.03 * 0.03]), abs=2e-4)
+    for c, row in enumerate([0, 2]):
+        back = to_official_pose(scenes.target_init_pose[c], off["off-mug-a"], TABLE_TOP)
+        np.testing.assert_allclose(back, src["init_pose"][row], atol=1e-9)
+        np.testing.assert_allclose(to_official_pose(scenes.target_goal_pose[c], off["off-mug-a"], TABLE_TOP),
+                                   src["goal_pose"][row], atol=1e-9)
+        obs = scenes.obstacles(c)
+        assert [scenes.attrs["official"]["names"][n] for n, _ in obs] == src["obstacle_name"][row]
+        for (n, p), q in zip(obs, src["obstacle_pose"][row]):
+            np.testing.assert_allclose(to_official_pose(p, off[n], TABLE_TOP), q, atol=1e-9)
+        assert scenes.support(c)[0] == "table" and scenes.base(c) is None
+    g, attrs = read_task_grasps(out / "grasps/task/placing/off-mug-a.zarr")
+    assert g["config"].tolist() == [0, 0, 1] and g["kept_per_config"].tolist() == [2, 1]
+    assert (g["prior_index"] == NO_PRIOR).all() and attrs["official"]["row"] == [0, 1, 2]
+    recon = np.concatenate(src["recon_param"])
+    np.testing.assert_allclose(shift_grasp(g["grasp_init"], TABLE_TOP), recon, atol=1e-5)
+    # The goal grasp is the initial hand carried by T_goal T_init^-1 (official poses, official frame).
+    for k, row in enumerate([0, 1, 2]):
+        T = pose_matrix(src["goal_pose"][row]) @ np.linalg.inv(pose_matrix(src["init_pose"][row]))
+        v_init = hand.vertices(recon[k:k + 1].astype(np.float64))[0]
+        v_goal = hand.vertices(shift_grasp(g["grasp_goal"][k:k + 1], TABLE_TOP))[0]
+        np.testing.assert_allclose(v_goal, v_init @ T[:3, :3].T + T[:3, 3], atol=1e-5)
+
+
+def test_shelving_and_stacking_quirks(imported):
+    out, src = imported["out"], imported["src"]
+    shelving = read_scenes(out / "scenes/shelving/off-mug-a.zarr")
+    assert shelving.supports == ["shelf-shelf01"] and len(shelving) == 2
+    np.testing.assert_allclose(to_official_pose(shelving.support(0)[1], None, TABLE_TOP),
+                               src["shelving/mug_a"]["shelf_pose"][0], atol=1e-9)
+    test = read_scenes(out / "test_scenes/shelving/off-mug-a.zarr")
+    assert len(test) == 2 and test.attrs["official"]["file"] == f"{DS}/shelving/test/mug_a.json"
+    supports = json.loads((out / "objects/supports/supports.json").read_text())["supports"]
+    shelf = next(s for s in supports if s["name"] == "shelf-shelf01")
+    assert len(shelf["boxes"]) == 4 and shelf["params"]["box_fill"] == pytest.approx(1.0, abs=1e-6)
+    stacking = read_scenes(out / "scenes/stacking/off-brick-a.zarr")
+    g, _ = read_task_grasps(out / "grasps/task/stacking/off-brick-a.zarr")
+    assert len(stacking) == 2 and stacking.base(0)[0] == "off-brick-c" and len(g["config"]) == 2
+    off = _offsets(out)
+    np.testing.assert_allclose(to_official_pose(stacking.base(1)[1], off["off-brick-c"], TABLE_TOP),
+                               src["stacking/A"]["init"][1][1], atol=1e-9)
+    np.testing.assert_allclose(shift_grasp(g["grasp_init"], TABLE_TOP),
+                               np.concatenate(src["stacking/A"]["recon_parms"]), atol=1e-5)
+    catalog = pd.read_csv(out / "objects/catalog.csv", keep_default_na=False).set_index("name")
+    assert catalog.loc["off-mug-a", "split"] == "train"  # placing's train list decides (first read)
+    assert catalog.loc["off-can-b", "split"] == "test"  # their val is their evaluation set
+    assert catalog.loc["off-box-c", "split"] == "" and catalog.loc["off-brick-f", "split"] == "test"
+    assert (catalog.status == "ok").all() and (catalog.source == "official").all()
+    mesh_dir = out / "objects/off-can-b"
+    assert {p.name for p in mesh_dir.iterdir()} == {"mesh.obj", "collision.obj", "object.urdf", "meta.json"}
+    assert off["off-can-b"] == pytest.approx([0.0, 0.0, 0.05], abs=1e-9)
+
+
+def test_scenes_load_into_the_simulator(imported):
+    """The imported objects, supports and scenes are what the simulation stages load."""
+    from tohgs.assets.supports import read_supports
+    from tohgs.sim.scenes import load_configuration
+    from tohgs.sim.world import World
+
+    out = imported["out"]
+    supports = read_supports(out / "objects/supports/supports.json")
+    world = World()
+    try:
+        for task, name in (("placing", "off-mug-a"), ("shelving", "off-mug-a"), ("stacking", "off-brick-a")):
+            scenes = read_scenes(out / f"scenes/{task}/{name}.zarr")
+            bodies = load_configuration(world, scenes, 0, out / "objects", supports)
+            assert bodies["target"] is not None and len(bodies["obstacles"]) == len(scenes.obstacles(0))
+            assert (bodies["base"] is not None) == (task == "stacking")
+    finally:
+        world.close()
+
+
+# --- the restricted loader ------------------------------------------------------------------------------
+
+class _Evil:
+    def __reduce__(self):
+        import os
+
+        return (os.system, ("echo should-never-run",))
+
+
+def test_restricted_loader_refuses_code():
+    evil = pickle.dumps(_Evil())  # pickling only names os.system; nothing runs
+    with pytest.raises(ValueError, match=r"refusing global '(os|posix)\.system'"):
+        safe_loads(evil, "evil.pkl")
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "|O", "fortran_order": False, "shape": ()})
+    with pytest.raises(ValueError, match=r"evil\.npy: refusing global"):
+        load_official_npy(header.getvalue() + evil, "evil.npy")  # the header writes the magic
+    with pytest.raises(ValueError, match="refusing global 'collections.OrderedDict'"):
+        safe_loads(pickle.dumps(__import__("collections").OrderedDict(a=1)), "x")
+    ok = io.BytesIO()
+    np.save(ok, {"a": [np.arange(3.0)], "b": "name"}, allow_pickle=True)
+    d = load_official_npy(ok.getvalue())
+    assert d["b"] == "name" and np.array_equal(d["a"][0], np.arange(3.0))
+
+
+# --- the round trip -------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("task,stem,target", [("placing", "can_b", "off-can-b"), ("shelving", "mug_a", "off-mug-a"),
+                                              ("stacking", "F", "off-brick-f")])
+def test_round_trip(imported, hand, tmp_path, task, stem, target):
+    """import -> predictions made of imported grasps -> export -> read back -> the official poses and the
+    hand's vertices of the same grasps."""
+    out = imported["out"]
+    test = read_scenes(out / f"test_scenes/{task}/{target}.zarr")
+    g, _ = read_task_grasps(out / f"grasps/task/{task}/{target}.zarr")
+    c_n, s_n = len(test), 2
+    wrist = hand.rest_joints[0]
+    grasp_init = np.stack([g["grasp_init"][np.arange(s_n) % len(g["grasp_init"])]] * c_n).astype(np.float64)
+    grasp_goal = np.stack([transform_grasp(grasp_init[c], pose_matrix(test.target_goal_pose[c])
+                                           @ np.linalg.inv(pose_matrix(test.target_init_pose[c])), wrist)
+                           for c in range(c_n)])
+    kept = np.ones((c_n, s_n), bool)
+    kept[0, 1] = False  # a discarded grasp is not exported
+    pred = tmp_path / f"{task}.zarr"
+    rev = np.arange(c_n)[::-1]  # the store's rows in another order than the official configurations
+    write_predictions({"object_id": np.zeros(c_n), "config_index": rev, "contact": np.zeros((c_n, s_n, 4)),
+                       "grasp_init": grasp_init[rev], "grasp_goal": grasp_goal[rev], "kept": kept[rev]},
+                      {"task": task, "method": "test", "objects": [target]}, pred)
+    written = export_official(pred, out / "test_scenes", hand, tmp_path / "result" / "run")
+    assert list(written) == [stem] and written[stem].name == f"{stem}.npy"
+    back = load_official_npy(written[stem].read_bytes(), str(written[stem]))
+    src = imported["src"][f"{task}/test/{stem}"]
+    assert back["config"] == [c for c in range(c_n) for s in range(s_n) if kept[c, s]]
+    assert back["n_hand_vertices"] == len(hand.rest_vertices) == back["init_hand_vertex"][0].shape[0]
+    grasps = np.concatenate([grasp_init[c, kept[c]] for c in range(c_n)])  # the store's order reversed back
+    v_ref = hand.vertices(shift_grasp(grasps.astype(np.float32), TABLE_TOP))
+    np.testing.assert_allclose(np.stack(back["init_hand_vertex"]), v_ref, atol=1e-5)
+    for k, c in enumerate(back["config"]):
+        init_key, goal_key = ("init", "goal") if task == "stacking" else ("init_pose", "goal_pose")
+        if task == "stacking":
+            assert back["init_pose"][k][0] == src[init_key][c][0] and back["init_pose"][k][2] == src[init_key][c][2]
+            np.testing.assert_allclose(back["init_pose"][k][1], src[init_key][c][1], atol=1e-9)
+            p_init, p_goal = back["init_pose"][k][3], back["goal_pose"][k][3]
+        else:
+            p_init, p_goal = back["init_pose"][k], back["goal_pose"][k]
+            assert back["obstacle_name"][k] == src["obstacle_name"][c]
+            np.testing.assert_allclose(np.reshape(back["obstacle_pose"][k], (-1, 7)),
+                                       np.reshape(src["obstacle_pose"][c], (-1, 7)), atol=1e-9)
+            assert back["grasped_obj"] == stem
+        np.testing.assert_allclose(p_init, src[init_key][c] if task != "stacking" else src[init_key][c][3], atol=1e-9)
+        np.testing.assert_allclose(p_goal, src[goal_key][c] if task != "stacking" else src[goal_key][c][3], atol=1e-9)
+        if task == "shelving":
+            assert back["shelf_name"][k] == src["shelf_name"][c]
+            np.testing.assert_allclose(back["shelf_pose"][k], src["shelf_pose"][c], atol=1e-9)
+        # The official evaluation's goal hand: the initial hand carried by the official poses.
+        T = pose_matrix(p_goal) @ np.linalg.inv(pose_matrix(p_init))
+        np.testing.assert_allclose(back["goal_hand_vertex"][k], back["init_hand_vertex"][k] @ T[:3, :3].T + T[:3, 3],
+                                   atol=2e-5)
