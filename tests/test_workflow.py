@@ -7,6 +7,7 @@ or change settings never touch the repository's own results.
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import json
 import math
 import os
@@ -642,3 +643,91 @@ def test_the_code_inputs_are_derived_from_the_imports(tmp_path):
     assert {f.name for f in code_inputs(tmp_path / "s.py", (), tmp_path)} == {"__init__.py", "a.py", "b.py"}
     with pytest.raises(FileNotFoundError, match="no module"):
         code_inputs(tmp_path / "s.py", ("models/nothing",), tmp_path)
+
+
+# What the SLURM test runs: every stage of one task's data (objects, catalog, scenes, prior grasps, task
+# grasps, maps), one training, and the Dataset row's prediction and evaluation (32 jobs).
+SLURM_TARGETS = ("results/metrics/placing/dataset.parquet", "results/models/placing/contact_net.pt")
+
+
+def _slurm_skip_reason() -> str | None:
+    if os.environ.get("TOHGS_SLURM_TEST", "1") == "0":
+        return "TOHGS_SLURM_TEST=0"
+    if os.geteuid() != 0:
+        return "starts a SLURM cluster: needs root"
+    if shutil.which("apt-get") is None and shutil.which("slurmctld") is None:
+        return "no SLURM and no apt-get to install it"
+    if importlib.util.find_spec("snakemake_executor_plugin_slurm") is None:
+        return "snakemake-executor-plugin-slurm is not installed (the test extra has it)"
+    return None
+
+
+def _same_store(a: Path, b: Path) -> bool:
+    import numpy as np
+    import zarr
+
+    ga, gb = zarr.open_group(a, mode="r"), zarr.open_group(b, mode="r")
+    keys = sorted(ga.array_keys())
+    return keys == sorted(gb.array_keys()) and all(np.array_equal(ga[k][...], gb[k][...], equal_nan=True) for k in keys)
+
+
+def test_a_real_slurm_cluster_runs_the_workflow_to_the_local_runs_outputs(smoke_run, tmp_path):
+    """scripts/local_slurm.sh starts a single-node SLURM 22.05 (slurmctld, slurmd, slurmdbd on MariaDB,
+    munge); the smoke workflow's SLURM_TARGETS run through `--workflow-profile profiles/slurm` (the SLURM
+    executor plugin, the objects' jobs in groups), every job as a SLURM job with the resources the workflow
+    gives it, and write the same stores, model weights and metrics as the local smoke run (same machine:
+    bit-identical). The cluster stops afterwards."""
+    reason = _slurm_skip_reason()
+    if reason:
+        pytest.skip(reason)
+    work = tmp_path / "work"
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
+    for d in ("workflow", "config", "tohgs", ".test", "profiles"):
+        shutil.copytree(REPO / d, work / d, ignore=ignore)
+    env = {**_env(work), "TOHGS_SLURM_DIR": str(tmp_path / "slurm"), "SLURM_CONF": str(tmp_path / "slurm/etc/slurm.conf")}
+    script = str(REPO / "scripts/local_slurm.sh")
+    install = subprocess.run([script, "install"], capture_output=True, text=True, timeout=900, env=env,
+                             stdin=subprocess.DEVNULL)
+    if install.returncode != 0:  # the package registry, not the code: say so and skip
+        pytest.skip(f"could not install SLURM: {(install.stdout + install.stderr)[-500:]}")
+    start = subprocess.run([script, "start"], capture_output=True, text=True, timeout=900, env=env,
+                           stdin=subprocess.DEVNULL)
+    try:
+        assert start.returncode == 0, (start.stdout + start.stderr)[-3000:]
+        cmd = [sys.executable, "-m", "snakemake", "--workflow-profile", "profiles/slurm", "--configfile",
+               ".test/config/config.yaml", "--slurm-init-seconds-before-status-checks", "5",
+               "--seconds-between-status-checks", "5", *SLURM_TARGETS]
+        run = subprocess.run(cmd, cwd=work, capture_output=True, text=True, timeout=1800, env=env,
+                             stdin=subprocess.DEVNULL)
+        assert run.returncode == 0, (run.stdout + run.stderr)[-5000:]
+        acct = subprocess.run(["sacct", "-X", "-n", "-P", "-o", "JobID,Comment,State,ReqMem,Timelimit"],
+                              capture_output=True, text=True, timeout=60, env=env)
+    finally:
+        subprocess.run([script, "stop"], capture_output=True, text=True, timeout=300, env=env)
+    assert acct.returncode == 0, acct.stderr
+    rows = [line.split("|") for line in acct.stdout.splitlines() if line]
+    assert rows and all(state == "COMPLETED" for _, _, state, _, _ in rows), rows
+    by_rule: dict[str, list[tuple[str, str]]] = {}
+    for _, comment, _, mem, limit in rows:
+        by_rule.setdefault(comment.split("_wildcards")[0], []).append((mem, limit))
+    cfg = _smoke_config(work)
+    # each rule's jobs went through SLURM with the workflow's resources (train: the config's mem_mb)
+    train = cfg["resources"]["rules"]["train"]
+    assert by_rule.get("rule_train") == [(f"{train['mem_mb']}M", f"{train['runtime'] // 60:02d}:{train['runtime'] % 60:02d}:00")], by_rule
+    for rule in ("rule_scenes", "rule_prior_synthesis", "rule_task_grasps", "rule_maps", "rule_predict", "rule_evaluate"):
+        assert rule in by_rule, sorted(by_rule)
+    assert "rule_objects_prepare_object" in by_rule  # the profile's group of the objects' jobs: one SLURM job
+    # the same outputs as the local run
+    for path in [*SLURM_TARGETS, "results/objects/catalog.csv"]:
+        assert (work / path).exists(), path
+    assert (work / "results/objects/catalog.csv").read_bytes() == (smoke_run / "results/objects/catalog.csv").read_bytes()
+    stores = sorted(p.relative_to(work) for p in (work / "results").rglob("*.zarr"))
+    assert len(stores) >= 10, stores
+    for store in stores:
+        assert _same_store(work / store, smoke_run / store), store
+    metrics = [pd.read_parquet(d / SLURM_TARGETS[0]) for d in (work, smoke_run)]
+    pd.testing.assert_frame_equal(*metrics)
+    import torch
+
+    weights = [torch.load(d / SLURM_TARGETS[1], weights_only=True)["state_dict"] for d in (work, smoke_run)]
+    assert weights[0].keys() == weights[1].keys() and all(torch.equal(weights[0][k], weights[1][k]) for k in weights[0])
