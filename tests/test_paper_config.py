@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
-import shutil
 import subprocess
 import sys
 import time
@@ -29,38 +27,20 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import yaml
+from workflow_tools import copy_workflow, job_stats, workflow_env
 
 REPO = Path(__file__).resolve().parent.parent
 PAPER = "config/paper.yaml"
 pytestmark = pytest.mark.slow  # two dry runs of the paper config: about 25 s each on 2 cores
 
 
-def _env(workdir: Path) -> dict[str, str]:
-    """The copy's library first on the path (an editable install points at the checkout's)."""
-    return {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(workdir), os.environ.get("PYTHONPATH")]))}
-
-
-def _job_stats(text: str) -> dict[str, int]:
-    """{rule: count} of the first "Job stats" table of a dry run's output ({} when there is none)."""
-    if "Job stats:" not in text:
-        return {}
-    counts: dict[str, int] = {}
-    for line in text.split("Job stats:", 1)[1].splitlines():
-        m = re.match(r"^(\w+)\s+(\d+)$", line.strip())
-        if m and m.group(1) == "total":
-            break
-        if m:
-            counts[m.group(1)] = int(m.group(2))
-    return counts
-
-
 def _dry_run(workdir: Path) -> dict[str, int]:
     cmd = [sys.executable, "-m", "snakemake", "--cores", "2", "--configfile", PAPER, "-n", "--quiet", "rules"]
-    out = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=600, env=_env(workdir),
+    out = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=600, env=workflow_env(workdir),
                          stdin=subprocess.DEVNULL)  # a dry run reads no stdin
     text = out.stdout + out.stderr
     assert out.returncode == 0, text[-3000:]
-    return _job_stats(text)
+    return job_stats(text)
 
 
 def _paper_config() -> dict:
@@ -100,10 +80,7 @@ def _write_catalog(workdir: Path, cfg: dict) -> pd.DataFrame:
 @pytest.fixture(scope="module")
 def paper_dag(tmp_path_factory) -> dict:
     """The paper config's jobs before and after the catalog checkpoint, the config and the catalog."""
-    work = tmp_path_factory.mktemp("paper")
-    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
-    for d in ("workflow", "config", "tohgs", ".test", "profiles"):
-        shutil.copytree(REPO / d, work / d, ignore=ignore)
+    work = copy_workflow(tmp_path_factory.mktemp("paper"))
     cfg = _paper_config()
     before = _dry_run(work)
     catalog = _write_catalog(work, cfg)

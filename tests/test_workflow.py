@@ -21,6 +21,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import yaml
+from workflow_tools import copy_workflow, job_stats, workflow_env
 
 REPO = Path(__file__).resolve().parent.parent
 pytestmark = pytest.mark.slow
@@ -31,20 +32,14 @@ def _snakemake(workdir: Path, *args: str, configfile: str = ".test/config/config
     return subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=1800, env=_env(workdir))
 
 
-def _env(workdir: Path) -> dict[str, str]:
-    """The jobs import the copy's library, not the checkout's (an editable install points there)."""
-    return {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(workdir), os.environ.get("PYTHONPATH")]))}
+_env = workflow_env
 
 
 def _stale_jobs(workdir: Path, configfile: str = ".test/config/config.yaml") -> dict[str, int]:
     """Dry run; returns {rule: number of jobs} that Snakemake would run."""
     out = _snakemake(workdir, "-n", "--quiet", "rules", configfile=configfile)
     assert out.returncode == 0, out.stderr[-3000:]
-    text = out.stdout + out.stderr
-    if "Nothing to be done" in text:
-        return {}
-    block = text.split("Job stats:", 1)[1]
-    return {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+)\s+(\d+)$", block, re.M) if m.group(1) != "total"}
+    return job_stats(out.stdout + out.stderr)
 
 
 def _smoke_config(workdir: Path) -> dict:
@@ -56,10 +51,7 @@ def _smoke_config(workdir: Path) -> dict:
 
 @pytest.fixture(scope="module")
 def smoke_run(tmp_path_factory) -> Path:
-    work = tmp_path_factory.mktemp("smoke")
-    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
-    for d in ("workflow", "config", "tohgs", ".test", "profiles"):
-        shutil.copytree(REPO / d, work / d, ignore=ignore)
+    work = copy_workflow(tmp_path_factory.mktemp("smoke"))
     out = _snakemake(work)
     assert out.returncode == 0, (out.stdout + out.stderr)[-5000:]
     return work
@@ -248,12 +240,7 @@ def _dry_run_of(workdir: Path, target: str, *options: str) -> dict[str, int] | s
            ".test/config/config.yaml", "-n", "--quiet", "rules"]
     out = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=600)
     text = out.stdout + out.stderr
-    if out.returncode != 0:
-        return text[-3000:]
-    if "Job stats:" not in text:
-        return {}
-    block = text.split("Job stats:", 1)[1]
-    return {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+)\s+(\d+)$", block, re.M) if m.group(1) != "total"}
+    return text[-3000:] if out.returncode != 0 else job_stats(text)
 
 
 def test_a_single_store_is_a_target(smoke_run):
@@ -471,8 +458,7 @@ def test_a_method_and_a_table_added_by_config_alone_run_through_prediction_evalu
     dry = subprocess.run([*cmd, "-n", "--quiet", "rules"], cwd=smoke_run, capture_output=True, text=True, timeout=600,
                          env=_env(smoke_run))
     assert dry.returncode == 0, dry.stderr[-3000:]
-    block = (dry.stdout + dry.stderr).split("Job stats:", 1)[1]
-    jobs = {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+)\s+(\d+)$", block, re.M) if m.group(1) != "total"}
+    jobs = job_stats(dry.stdout + dry.stderr)
     assert jobs == {"predict": 3, "evaluate": 3, "table": 1}, jobs
     run = subprocess.run(cmd, cwd=smoke_run, capture_output=True, text=True, timeout=1200, env=_env(smoke_run))
     assert run.returncode == 0, (run.stdout + run.stderr)[-4000:]
@@ -504,8 +490,7 @@ def test_a_second_seed_adds_replicas_and_the_table_pools_them(smoke_run):
         dry = subprocess.run([*command(extra), "-n", "--quiet", "rules"], cwd=smoke_run, capture_output=True,
                              text=True, timeout=600, env=_env(smoke_run))
         assert dry.returncode == 0, dry.stderr[-3000:]
-        block = (dry.stdout + dry.stderr).split("Job stats:", 1)[1]
-        return {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+)\s+(\d+)$", block, re.M) if m.group(1) != "total"}
+        return job_stats(dry.stdout + dry.stderr)
 
     assert jobs_of("seeds.yaml") == {"predict": 3, "evaluate": 3, "table": 1}
     # ContactDiffuser and GraspDiffuser once more per task
@@ -680,10 +665,7 @@ def test_a_real_slurm_cluster_runs_the_workflow_to_the_local_runs_outputs(smoke_
     reason = _slurm_skip_reason()
     if reason:
         pytest.skip(reason)
-    work = tmp_path / "work"
-    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
-    for d in ("workflow", "config", "tohgs", ".test", "profiles"):
-        shutil.copytree(REPO / d, work / d, ignore=ignore)
+    work = copy_workflow(tmp_path / "work")
     env = {**_env(work), "TOHGS_SLURM_DIR": str(tmp_path / "slurm"), "SLURM_CONF": str(tmp_path / "slurm/etc/slurm.conf")}
     script = str(REPO / "scripts/local_slurm.sh")
     install = subprocess.run([script, "install"], capture_output=True, text=True, timeout=900, env=env,
