@@ -19,7 +19,8 @@ class PredictSettings:
     ``contact_smoothing``, the neighbours over which ContactDiffuser's maps are averaged (0: none); ``tta``,
     ``filter``, ``contactgen`` and ``flex``: GraspTTA's adaptation, F-GraspTTA's filter, ContactGen's solver
     and FLEX's optimisation (:mod:`tohgs.methods.grasp_tta`, :mod:`tohgs.methods.filtered`,
-    :mod:`tohgs.methods.contact_gen`, :mod:`tohgs.methods.flex`). A
+    :mod:`tohgs.methods.contact_gen`, :mod:`tohgs.methods.flex`); ``steer``, scene-aware guidance of
+    GraspDiffuser's sampling (:mod:`tohgs.models.guidance`; beyond the paper, off by default). A
     method's ``settings`` block overlays the config's ``prediction`` block (the two sub-blocks key by key)."""
 
     samples: int = 16
@@ -34,6 +35,7 @@ class PredictSettings:
     filter: dict = field(default_factory=dict)  # tohgs.methods.filtered.FilterSettings
     contactgen: dict = field(default_factory=dict)  # tohgs.grasps.contactgen_solver.SolverSettings
     flex: dict = field(default_factory=dict)  # tohgs.grasps.flex.FlexSettings
+    steer: dict = field(default_factory=dict)  # tohgs.models.guidance.GuidanceSettings (scene-aware guidance)
 
 
 @dataclass

@@ -6,7 +6,8 @@ Keys of the method block: ``contact``, a contact component (``sample_contact``: 
 (``sample_grasps``: GraspDiffuser, ...). Per test configuration: S contact maps, one grasp per map. A
 component's maps may be smoothed (``settings.contact_smoothing``: each value the mean over its k nearest
 points); ground-truth maps never are. Without maps, the stored maps are those the sampled hands make on
-the object (the map shards' contact map, at their ``alpha_contact``).
+the object (the map shards' contact map, at their ``alpha_contact``). With ``settings.steer`` (beyond the
+paper) the grasp generator's sampling is guided out of the scene at both poses (:mod:`tohgs.models.guidance`).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import torch
 
 from tohgs.geometry.hand_object import contact_values
 from tohgs.methods.base import Method, Prediction, gt_rows
+from tohgs.models.guidance import GuidanceSettings
 
 GROUND_TRUTH = "ground_truth"
 NO_CONTACT = "none"
@@ -55,12 +57,20 @@ class ContactGrasp(Method):
                              "contact maps (a grasp_diffuser with contact_input: false reads the object alone)")
         if src == NO_CONTACT and self.hand is None:
             raise ValueError(f"method {self.name!r}: without maps the stored maps are the hands'; the job needs the hand model")
+        self.steer = GuidanceSettings(**self.settings.steer)
+        if self.steer.active:
+            self.require_hand("guided sampling (settings.steer) poses hands")
+
+    def _steer(self) -> dict:
+        """The guidance arguments of ``sample_grasps``: none unless ``settings.steer`` is active (a grasp
+        model without guidance, e.g. a CVAE, is then never asked for it)."""
+        return {"steer": self.steer, "hand": self.hand} if self.steer.active else {}
 
     def predict(self, batch, shard, row, generator, rng) -> Prediction | None:
         s = self.settings
         t0 = time.perf_counter()
         if self.cfg["contact"] == NO_CONTACT:
-            grasp = self.grasp_model.sample_grasps(batch, s.sampler, s.steps, generator, s.guidance)
+            grasp = self.grasp_model.sample_grasps(batch, s.sampler, s.steps, generator, s.guidance, **self._steer())
             t1 = time.perf_counter()
             with torch.no_grad():
                 contact, _ = contact_values(batch.points, self.hand(grasp).vertices, float(shard.attrs.get("alpha_contact", 100.0)))
@@ -75,7 +85,8 @@ class ContactGrasp(Method):
                 return None
             contact = torch.as_tensor(shard.contact[ids[np.arange(s.samples) % len(ids)]], device=batch.device)
         t1 = time.perf_counter()
-        grasp = self.grasp_model.sample_grasps(batch.with_contact(contact), s.sampler, s.steps, generator, s.guidance)
+        grasp = self.grasp_model.sample_grasps(batch.with_contact(contact), s.sampler, s.steps, generator, s.guidance,
+                                               **self._steer())
         t2 = time.perf_counter()
         return Prediction(contact.cpu().numpy().astype(np.float32), grasp.cpu().numpy().astype(np.float64),
                           {"contact_map": t1 - t0, "grasp": t2 - t1})

@@ -132,7 +132,8 @@ class TimeMLP(nn.Module):
 @torch.no_grad()
 def sample(denoise: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], shape: tuple[int, ...], cfg: DiffusionConfig,
            sampler: str = "ddpm", steps: int | None = None, generator: torch.Generator | None = None,
-           device: str | torch.device = "cpu") -> torch.Tensor:
+           device: str | torch.device = "cpu",
+           guide: Callable[[torch.Tensor, torch.Tensor], torch.Tensor | None] | None = None) -> torch.Tensor:
     """Run the reverse process from Gaussian noise.
 
     Args:
@@ -142,6 +143,10 @@ def sample(denoise: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], shape:
         sampler: ``"ddpm"`` (all T steps unless ``steps``) or ``"ddim"`` (``steps`` steps, eta 0).
         steps: inference steps (default: T for DDPM, 100 for DDIM).
         generator: CPU generator for the initial noise and DDPM's noise (reproducible samples).
+        guide: ``g(x0, t) -> delta`` or None, asked at every step with the network's x0 estimate: the step
+            then continues as if the estimate were ``x0 - delta`` with the same noise estimate, i.e. the
+            sample moves by ``-sqrt(alpha-bar_prev) delta`` (the way DDIM carries its x0 estimate; the
+            last step returns ``x0 - delta``). None (or a None answer): the plain step, bit for bit.
 
     Returns:
         The denoised sample x_0 (shape ``shape``).
@@ -156,9 +161,12 @@ def sample(denoise: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], shape:
     for t in ts:
         tt = torch.full((shape[0],), t, dtype=torch.long, device=device)
         out = denoise(x, tt)
+        delta = None if guide is None else guide(sched.predict_x0_eps(out, t, x)[0], tt)
         if sampler == "ddpm":
             noise = torch.randn(shape, generator=generator).to(device)
             x = sched.ddpm_step(out, t, t - ratio, x, noise)
         else:
             x = sched.ddim_step(out, t, t - ratio, x)
+        if delta is not None:
+            x = x - sched.alpha_bar(t - ratio).to(x).sqrt() * delta
     return x

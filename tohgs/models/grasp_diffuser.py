@@ -72,6 +72,7 @@ from tohgs.hand.model import HandModel
 from tohgs.hand.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from tohgs.models.component import Component, seen_grasps
 from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, TimeMLP, sample
+from tohgs.models.guidance import GraspEnergy, GuidanceSettings, guidance_step
 from tohgs.models.pointnet2 import PointNet, PointNet2, PointNet2Config
 
 LOSS_WEIGHTS = {"placing": (15.0, 1.0, 5.0, 0.002), "shelving": (15.0, 1.0, 5.0, 0.002),
@@ -326,14 +327,22 @@ class GraspDiffuser(Component):
 
     @torch.no_grad()
     def sample_grasps(self, batch: Batch, sampler: str, steps: int, generator: torch.Generator,
-                      guidance: float = 1.0) -> torch.Tensor:
+                      guidance: float = 1.0, steer: GuidanceSettings | None = None, hand=None) -> torch.Tensor:
         """(B, 51) grasps in the network frame for the batch's objects and contact maps (``batch.contact``;
-        none without ``contact_input``), with classifier-free ``guidance`` (1: none)."""
+        none without ``contact_input``), with classifier-free ``guidance`` (1: none) and, with an active
+        ``steer``, each guided step's x0 moved down the scene-aware energy of the grasp it decodes to
+        (:mod:`tohgs.models.guidance`; needs the ``hand`` model)."""
         if batch.contact is None and self.cfg.contact_input:
             raise ValueError("GraspDiffuser samples grasps for contact maps; the batch has none")
         cond = self.condition(batch.points, batch.normals, batch.contact)
+        guide = None
+        if steer is not None and steer.active:
+            if hand is None:
+                raise ValueError("guided sampling (steer) poses hands: it needs the hand model")
+            guide = guidance_step(lambda x: self.decode(x, cond), GraspEnergy.of_batch(hand, batch, steer), steer,
+                                  self.diffusion.timesteps)
         x0 = sample(lambda xt, tt: self.guided(xt, tt, cond, guidance), (batch.size, self.dim), self.diffusion,
-                    sampler, steps, generator, batch.device)
+                    sampler, steps, generator, batch.device, guide)
         return self.decode(x0, cond)
 
     def set_hand(self, hand: HandModel) -> None:

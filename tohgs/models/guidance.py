@@ -1,0 +1,176 @@
+"""Scene-aware guidance of diffusion sampling: physics energies of a grasp, applied to the denoiser's x0.
+
+Beyond the paper (issue 20; the idea of DexGrasp Anything, CVPR 2025): at each guided denoising step the
+network's estimate of the clean sample ``x0`` is moved by a *normalised* gradient step down an energy of the
+grasp it decodes to,
+
+    x0 <- x0 - scale * g / max(||g||, eps),    g = d E(decode(x0)) / d x0,
+
+and the sampler continues from the moved estimate with the network's noise estimate kept, so the sample itself moves by
+``sqrt(alpha-bar_prev)`` times the shift (:func:`tohgs.models.diffusion.sample`'s ``guide``; letting the
+sampler re-derive the noise from the moved x0 would cancel most of the shift at every step but the
+last). The step has the same length whatever the energy's units, so ``scale`` (in the network's normalised
+units) is the one knob of its strength and the weights only mix the terms. Guidance acts on the last ``start`` fraction of
+the reverse process (``t <= start * T``), where x0 is a grasp worth correcting.
+
+The energy, per sample, from what a method is given (:class:`tohgs.data.batch.Batch`, the network frame,
+metres); never the evaluation's meshes:
+
+- ``scene``: the hand's penetration into the scene cloud at the initial pose and at the goal pose (the
+  hand carried by ``goal_transform`` = ``T_goal T_init^-1``), ``sum_v |min(d_v - margin, 0)|`` over the
+  hand's vertices, ``d_v`` the point-to-plane signed distance to the scene cloud
+  (:func:`tohgs.geometry.cloud.cloud_signed_distance`); a vertex deeper than ``max_depth`` is not counted
+  (behind an open edge of the cropped cloud).
+- ``object``: the hand's penetration into the object cloud, ``sum_v max(-d_v, 0)`` for vertices at most
+  ``max_depth`` inside.
+- ``contact``: consistency with the contact map the grasp was sampled for, ``sum_i (c_i - c_i(hand))^2``,
+  ``c_i(hand) = 1 - 2 (sigmoid(alpha d_i) - 0.5)`` of each object point's distance to the nearest vertex
+  (the maps' own definition, :func:`tohgs.geometry.hand_object.contact_values`).
+- ``joints``: distance of the 45 finger numbers outside the hand's joint-limit box, radians (0 for a hand
+  without limits, e.g. a MANO file's).
+
+All weights 0 (or ``scale`` 0) is no guidance: :func:`guidance_step` gives the sampler no guide, so the
+samples are exactly the unguided ones.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+
+from tohgs.geometry.cloud import cloud_signed_distance
+from tohgs.geometry.hand_object import contact_values
+
+TERMS = ("scene", "object", "contact", "joints")
+
+
+@dataclass(frozen=True)
+class GuidanceSettings:
+    """How guided sampling steers (module docstring).
+
+    Attributes:
+        scale: length of the normalised step on x0 per guided denoising step (network units); 0: none.
+        start: guide the steps with ``t <= start * T`` (1: every step).
+        w_scene, w_object, w_contact, w_joints: the terms' weights.
+        margin: clearance the scene term asks for, m.
+        max_depth: deeper penetrations are not counted (cloud edges), m.
+        alpha: the contact map's sharpness (the maps' alpha, 1/m).
+        hand_points: vertices used by the penetration terms (evenly spread; 0: all).
+    """
+
+    scale: float = 0.0
+    start: float = 0.5
+    w_scene: float = 1.0
+    w_object: float = 1.0
+    w_contact: float = 0.0
+    w_joints: float = 0.0
+    margin: float = 0.005
+    max_depth: float = 0.05
+    alpha: float = 100.0
+    hand_points: int = 0
+
+    def __post_init__(self):
+        if self.scale < 0 or not 0 <= self.start <= 1:
+            raise ValueError(f"guidance needs scale >= 0 and start in [0, 1], got {self.scale}, {self.start}")
+        if min(self.weights.values()) < 0:
+            raise ValueError(f"guidance weights must be non-negative, got {self.weights}")
+        if self.margin < 0 or self.max_depth <= 0 or self.alpha <= 0 or self.hand_points < 0:
+            raise ValueError("guidance needs margin >= 0, max_depth > 0, alpha > 0 and hand_points >= 0")
+
+    @property
+    def weights(self) -> dict[str, float]:
+        return {"scene": self.w_scene, "object": self.w_object, "contact": self.w_contact, "joints": self.w_joints}
+
+    @property
+    def active(self) -> bool:
+        """Whether guidance changes anything (a positive scale and a positive weight)."""
+        return self.scale > 0 and self.start > 0 and max(self.weights.values()) > 0
+
+
+class GraspEnergy:
+    """The guidance energy of (B, 51) network-frame grasps for one batch's objects and scenes.
+
+    Args:
+        hand: a :class:`tohgs.hand.model.HandModel` (its dtype and device are the batch's).
+        points, normals: (B, N, 3) object cloud and unit outward normals at the initial pose, m.
+        scene, scene_normals: (B, M, 3) scene cloud and normals (the same at both poses).
+        goal_transform: (B, 4, 4) ``T_goal T_init^-1`` in the network frame.
+        contact: (B, N) the sampled contact map in [0, 1], or None (the contact term is then 0).
+        settings: the weights and distances.
+    """
+
+    def __init__(self, hand, points: torch.Tensor, normals: torch.Tensor, scene: torch.Tensor,
+                 scene_normals: torch.Tensor, goal_transform: torch.Tensor, contact: torch.Tensor | None,
+                 settings: GuidanceSettings):
+        self.hand, self.s = hand, settings
+        self.points, self.normals, self.scene, self.scene_normals = points, normals, scene, scene_normals
+        self.goal, self.contact = goal_transform, contact
+        v = hand.rest_vertices.shape[0]
+        k = v if settings.hand_points <= 0 else min(v, settings.hand_points)
+        self.sub = torch.linspace(0, v - 1, k, device=points.device).round().long()
+        lim = hand.joint_limits.reshape(45, 2).to(points)
+        self.limits = lim if bool((lim[:, 1] > lim[:, 0]).any()) else None
+
+    @classmethod
+    def of_batch(cls, hand, batch, settings: GuidanceSettings) -> "GraspEnergy":
+        """The energy of a :class:`tohgs.data.batch.Batch` (its contact map, if it has one)."""
+        return cls(hand, batch.points, batch.normals, batch.scene, batch.scene_normals, batch.goal_transform,
+                   batch.contact, settings)
+
+    def terms(self, grasp: torch.Tensor) -> dict[str, torch.Tensor]:
+        """The unweighted terms, each (B,), of (B, 51) grasps (differentiable in the grasps)."""
+        s = self.s
+        verts = self.hand(grasp).vertices
+        sub = verts[:, self.sub]
+        goal = sub @ self.goal[:, :3, :3].transpose(1, 2) + self.goal[:, None, :3, 3]
+        scene = 0
+        for pts in (sub, goal):
+            d = cloud_signed_distance(pts, self.scene, self.scene_normals)
+            scene = scene + ((d > -s.max_depth).to(d) * (s.margin - d).clamp(min=0)).sum(-1)
+        d = cloud_signed_distance(sub, self.points, self.normals)
+        obj = ((d > -s.max_depth).to(d) * (-d).clamp(min=0)).sum(-1)
+        out = {"scene": scene, "object": obj}
+        if self.contact is not None and s.w_contact > 0:
+            c, _ = contact_values(self.points, verts, s.alpha)
+            out["contact"] = ((c - self.contact) ** 2).sum(-1)
+        else:
+            out["contact"] = torch.zeros_like(obj)
+        if self.limits is not None and s.w_joints > 0:
+            q = grasp[:, 6:]
+            out["joints"] = ((self.limits[:, 0] - q).clamp(min=0) + (q - self.limits[:, 1]).clamp(min=0)).sum(-1)
+        else:
+            out["joints"] = torch.zeros_like(obj)
+        return out
+
+    def __call__(self, grasp: torch.Tensor) -> torch.Tensor:
+        """(B,) the weighted sum of the terms."""
+        w = self.s.weights
+        return sum(w[k] * v for k, v in self.terms(grasp).items() if w[k] > 0)
+
+
+def guidance_step(decode: Callable[[torch.Tensor], torch.Tensor], energy: Callable[[torch.Tensor], torch.Tensor],
+                  settings: GuidanceSettings, timesteps: int, eps: float = 1e-8
+                  ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor | None] | None:
+    """The ``guide`` of :func:`tohgs.models.diffusion.sample`: at the guided steps (``t <= start * T``) the
+    (B, D) shift ``scale * g / ||g||`` per sample, ``g`` the gradient in x0 of ``energy(decode(x0))`` (B,)
+    (a sample whose gradient vanishes is not moved); None at the other steps.
+
+    ``decode`` maps (B, D) normalised vectors to (B, 51) grasps, differentiably; ``timesteps`` is the
+    schedule's T. Without :attr:`GuidanceSettings.active`: None (no guide: the unguided sampler).
+    """
+    if not settings.active:
+        return None
+    t_max = settings.start * timesteps
+
+    def guide(x0: torch.Tensor, t: torch.Tensor) -> torch.Tensor | None:
+        if float(t.max()) > t_max:
+            return None
+        with torch.enable_grad():
+            x = x0.detach().requires_grad_(True)
+            (g,) = torch.autograd.grad(energy(decode(x)).sum(), x)
+        norm = g.flatten(1).norm(dim=1).reshape(-1, *([1] * (g.dim() - 1)))
+        return torch.where(norm > eps, settings.scale * g / norm.clamp(min=eps), torch.zeros_like(g))
+
+    return guide
