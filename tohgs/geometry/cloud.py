@@ -38,6 +38,20 @@ def penetration_fraction(query: torch.Tensor, cloud: torch.Tensor, normals: torc
     return inside_cloud(query, cloud, normals, max_depth).float().mean(-1)
 
 
+
+def clearance_violation(d: torch.Tensor, margin: float, max_depth: float) -> torch.Tensor:
+    """(...,) ``sum |min(d - margin, 0)|`` over the last axis of signed distances ``d`` (m), leaving out
+    points more than ``max_depth`` inside (behind an open edge of a cropped cloud): the obstacle term of
+    FLEX and of guided sampling."""
+    return ((d > -max_depth).to(d) * (margin - d).clamp(min=0)).sum(-1)
+
+
+def even_subset(n: int, k: int, device: torch.device | str = "cpu") -> torch.Tensor:
+    """(min(n, k),) indices spread evenly over ``range(n)`` (``k <= 0``: all ``n``): the hand vertices the
+    penetration terms use."""
+    k = n if k <= 0 else min(n, k)
+    return torch.linspace(0, n - 1, k, device=device).round().long()
+
 class CloudIndex:
     """Nearest-point search in one fixed cloud (an object's or a scene's) for many queries: one k-d tree,
     built once, on the CPU; the full distance matrix on other devices. The optimisations that keep a hand

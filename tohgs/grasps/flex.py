@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from tohgs.geometry.cloud import CloudIndex
+from tohgs.geometry.cloud import CloudIndex, clearance_violation, even_subset
 from tohgs.grasps.synthesis import SynthesisSettings, initial_grasps
 from tohgs.grasps.tta import clamp_to_limits
 from tohgs.hand.layout import FINGERS
@@ -99,9 +99,7 @@ class FlexProblem:
         self.object = CloudIndex(points, normals)
         self.scene = CloudIndex(scene, scene_normals)
         self.goal = goal_transform
-        v = hand.rest_vertices.shape[0]
-        k = v if settings.hand_points <= 0 else min(v, settings.hand_points)
-        self.sub = torch.linspace(0, v - 1, k, device=points.device).round().long()
+        self.sub = even_subset(hand.rest_vertices.shape[0], settings.hand_points, points.device)
         self.groups = contact_groups(hand)
         self.kept: dict[str, torch.Tensor] = {}
 
@@ -128,7 +126,7 @@ class FlexProblem:
         obstacle = 0
         for key, pts in (("init", sub), ("goal", goal)):
             ss = self.scene.signed_distance(pts, self.kept[key])
-            obstacle = obstacle + ((ss > -s.max_depth).float() * (ss - s.margin).clamp(max=0).abs()).sum(-1)
+            obstacle = obstacle + clearance_violation(ss, s.margin, s.max_depth)
         terms["obstacle"] = s.w_obstacle * obstacle
         terms["prior"] = s.w_prior * (z**2).sum(-1)
         return {**terms, "energy": sum(terms.values())}

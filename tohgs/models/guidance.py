@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import torch
 
-from tohgs.geometry.cloud import cloud_signed_distance
+from tohgs.geometry.cloud import clearance_violation, cloud_signed_distance, even_subset
 from tohgs.geometry.hand_object import contact_values
 
 TERMS = ("scene", "object", "contact", "joints")
@@ -107,9 +107,7 @@ class GraspEnergy:
         self.hand, self.s = hand, settings
         self.points, self.normals, self.scene, self.scene_normals = points, normals, scene, scene_normals
         self.goal, self.contact = goal_transform, contact
-        v = hand.rest_vertices.shape[0]
-        k = v if settings.hand_points <= 0 else min(v, settings.hand_points)
-        self.sub = torch.linspace(0, v - 1, k, device=points.device).round().long()
+        self.sub = even_subset(hand.rest_vertices.shape[0], settings.hand_points, points.device)
         lim = hand.joint_limits.reshape(45, 2).to(points)
         self.limits = lim if bool((lim[:, 1] > lim[:, 0]).any()) else None
 
@@ -128,9 +126,8 @@ class GraspEnergy:
         scene = 0
         for pts in (sub, goal):
             d = cloud_signed_distance(pts, self.scene, self.scene_normals)
-            scene = scene + ((d > -s.max_depth).to(d) * (s.margin - d).clamp(min=0)).sum(-1)
-        d = cloud_signed_distance(sub, self.points, self.normals)
-        obj = ((d > -s.max_depth).to(d) * (-d).clamp(min=0)).sum(-1)
+            scene = scene + clearance_violation(d, s.margin, s.max_depth)
+        obj = clearance_violation(cloud_signed_distance(sub, self.points, self.normals), 0.0, s.max_depth)
         out = {"scene": scene, "object": obj}
         if self.contact is not None and s.w_contact > 0:
             c, _ = contact_values(self.points, verts, s.alpha)
