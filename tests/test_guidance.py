@@ -11,7 +11,8 @@ import torch
 from tohgs.data.batch import Batch
 from tohgs.hand import load_hand
 from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, sample
-from tohgs.models.guidance import GraspEnergy, GuidanceSettings, guidance_step
+from tohgs.models.guidance import (GraspEnergy, GuidanceSettings, contact_guidance_step, guidance_step,
+                                    near_scene_weights, select_diverse)
 
 
 @pytest.fixture(scope="module")
@@ -111,7 +112,8 @@ def test_settings_are_checked_and_zero_weights_or_scale_are_inactive():
     assert not GuidanceSettings(scale=1.0, w_scene=0, w_object=0).active
     assert not GuidanceSettings(scale=1.0, start=0.0).active
     assert GuidanceSettings(scale=0.1).active
-    for bad in ({"scale": -1}, {"start": 1.5}, {"w_scene": -1}, {"max_depth": 0}):
+    for bad in ({"scale": -1}, {"start": 1.5}, {"w_scene": -1}, {"max_depth": 0}, {"contact_scale": -1},
+                {"candidates": 0}, {"pool": 0.0}, {"near": 0.0}):
         with pytest.raises(ValueError):
             GuidanceSettings(**bad)
 
@@ -201,3 +203,136 @@ def test_guided_sampling_takes_a_hand_out_of_the_table_at_both_poses(hand):
     assert init0 > 0.15 and goal0 > init0, (init0, goal0)
     assert init1 < 0.02 and goal1 < 0.02, (init1, goal1)  # 0 and 0.004 here
     assert float(guided.abs().max()) < 6  # within the data's spread: moved out of the tables, not away
+
+
+# --- guided contact sampling ---------------------------------------------------------------------------------
+
+def test_near_scene_weights_fall_from_one_at_the_scene_to_zero_at_near():
+    dist = torch.tensor([[0.0, 0.01, 0.02, 0.04]])
+    dmap = 1 - 2 * (torch.sigmoid(30 * dist) - 0.5)  # the maps' own formula (alpha 30)
+    far = 1 - 2 * (torch.sigmoid(30 * torch.full_like(dist, 0.1)) - 0.5)
+    w = near_scene_weights(dmap, far, near=0.02)
+    torch.testing.assert_close(w, torch.tensor([[1.0, float(w[0, 1]), 0.0, 0.0]]), atol=1e-6, rtol=0)
+    assert 0.3 < float(w[0, 1]) < 0.7
+    torch.testing.assert_close(near_scene_weights(far, dmap, near=0.02), w)  # either pose counts
+
+
+def test_contact_guidance_moves_contact_off_the_points_near_the_scene_and_leaves_the_others():
+    """The exact denoiser of N(0, I) maps (contact ``(x + 1) / 2``): guided, the near half's contact falls
+    well below the unguided draw's; the far half is bit-identical (its weight, so its shift, is 0)."""
+    b, n = 8, 64
+    cfg = DiffusionConfig(timesteps=1000, beta_end=0.01, prediction="sample", clip=0.0)
+    ab = NoiseSchedule(cfg).alphas_cumprod
+
+    def denoise(x, t):
+        return ab[t][:, None].sqrt() * x
+
+    w = torch.zeros(b, n)
+    w[:, : n // 2] = torch.linspace(0.2, 1.0, n // 2)
+
+    def run(s: GuidanceSettings) -> torch.Tensor:
+        guide = contact_guidance_step(w, s, cfg.timesteps)
+        return (sample(denoise, (b, n), cfg, "ddim", 20, torch.Generator().manual_seed(3), guide=guide) + 1) / 2
+
+    assert contact_guidance_step(w, GuidanceSettings(), 1000) is None
+    plain, guided = run(GuidanceSettings()), run(GuidanceSettings(contact_scale=2.0, start=0.5))
+    assert torch.equal(plain[:, n // 2:], guided[:, n // 2:])
+    drop = (plain[:, : n // 2] - guided[:, : n // 2]).mean()
+    assert drop > 0.1, float(drop)
+    nearest, least = slice(n // 2 - 4, n // 2), slice(0, 4)
+    assert (plain[:, nearest] - guided[:, nearest]).mean() > (plain[:, least] - guided[:, least]).mean()  # more where nearer
+
+
+def test_the_contact_diffuser_samples_guided_only_when_asked():
+    from tests.test_diffusion import SMALL_PN
+    from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
+
+    torch.manual_seed(0)
+    model = ContactDiffuser(ContactDiffuserConfig(d_model=16, n_blocks=1, pointnet=SMALL_PN)).eval()
+    batch = _batch(2, torch.Generator().manual_seed(1))
+
+    def draw(steer=None):
+        return model.sample_contact(batch, "ddim", 10, torch.Generator().manual_seed(2), steer=steer)
+
+    plain = draw()
+    assert torch.equal(plain, draw(GuidanceSettings(scale=1.0)))  # the grasp levers leave the maps be
+    guided = draw(GuidanceSettings(contact_scale=3.0, start=1.0, near=0.05))
+    near = near_scene_weights(batch.d_init, batch.d_goal, 0.05) > 0.5
+    assert (plain - guided)[near].mean() > 0.05
+
+
+# --- sample, score, keep --------------------------------------------------------------------------------------
+
+def _reference_pick(energy: np.ndarray, verts: np.ndarray, keep: int, pool: float) -> list[int]:
+    """Greedy farthest-point pick among the lowest-energy candidates, written plainly."""
+    size = min(len(energy), max(keep, int(np.ceil(pool * len(energy)))))
+    cand = sorted(range(len(energy)), key=lambda i: (energy[i], i))[:size]
+
+    def dist(i, j):
+        return sum(np.linalg.norm(verts[i][v] - verts[j][v]) for v in range(verts.shape[1]))
+
+    picked = [cand[0]]
+    while len(picked) < keep:
+        best, best_d = None, -1.0
+        for i in cand:
+            if i in picked:
+                continue
+            d = min(dist(i, j) for j in picked)
+            if d > best_d + 1e-12:
+                best, best_d = i, d
+        picked.append(best)
+    return picked
+
+
+def test_select_diverse_equals_a_plain_greedy_pick_and_spreads_more_than_the_lowest_energies():
+    rng = np.random.default_rng(0)
+    k, v, keep = 24, 5, 6
+    centres = rng.normal(size=(k, 1, 3)) * np.where(np.arange(k) < 12, 0.01, 0.1)[:, None, None]
+    verts = centres + rng.normal(size=(1, v, 3)) * 0.02
+    energy = np.where(np.arange(k) < 12, 0.0, 1.0) + rng.uniform(0, 0.5, k)  # the tight cluster is better
+    idx = select_diverse(torch.as_tensor(energy), torch.as_tensor(verts), keep, 0.75).tolist()
+    assert idx == _reference_pick(energy, verts, keep, 0.75)
+    assert idx[0] == int(np.argmin(energy))
+    pool = set(np.argsort(energy, kind="stable")[:18].tolist())
+    assert set(idx) <= pool
+
+    def spread(ids):
+        d = [np.linalg.norm(verts[i] - verts[j], axis=-1).sum() for a, i in enumerate(ids) for j in ids[a + 1:]]
+        return np.mean(d)
+
+    lowest = np.argsort(energy, kind="stable")[:keep].tolist()
+    assert spread(idx) > 2 * spread(lowest)
+    assert select_diverse(torch.as_tensor(energy), torch.as_tensor(verts), keep, 0.01).tolist() == lowest[:1] + \
+        _reference_pick(energy, verts, keep, 0.01)[1:]
+    with pytest.raises(ValueError, match="cannot keep"):
+        select_diverse(torch.as_tensor(energy), torch.as_tensor(verts), k + 1, 0.5)
+
+
+def test_contact_grasp_samples_candidates_and_keeps_s_of_lower_energy(hand):
+    from types import SimpleNamespace
+
+    from tests.test_diffusion import SMALL_PN
+    from tohgs.methods.base import PredictSettings
+    from tohgs.methods.contact_grasp import ContactGrasp
+    from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
+    from tohgs.models.grasp_diffuser import GraspDiffuser, GraspDiffuserConfig
+
+    hand32 = load_hand("anny")
+    torch.manual_seed(0)
+    grasp = GraspDiffuser(GraspDiffuserConfig(d_model=16, n_blocks=1, pointnet=SMALL_PN)).eval()
+    grasp.set_hand(hand32)
+    contact = ContactDiffuser(ContactDiffuserConfig(d_model=16, n_blocks=1, pointnet=SMALL_PN)).eval()
+    models = {"cd": contact, "gd": grasp}
+    cfg = {"contact": "cd", "grasp": "gd"}
+    shard = SimpleNamespace(attrs={"alpha_contact": 100.0, "alpha_distance": 30.0})
+    batch = _batch(1, torch.Generator().manual_seed(1)).repeat(4)
+    steer = {"candidates": 3, "pool": 0.5, "w_scene": 1.0, "w_object": 1.0, "hand_points": 100}
+    method = ContactGrasp("g", cfg, models, PredictSettings(samples=4, steps=5, steer=steer), torch.device("cpu"), hand32)
+    pred = method.predict(batch, shard, 0, torch.Generator().manual_seed(0), np.random.default_rng(0))
+    assert pred.grasp.shape == (4, 51) and pred.contact.shape == (4, 64) and "select" in pred.seconds
+    assert pred.info["energy_kept"] <= pred.info["energy_candidates"]
+    with pytest.raises(ValueError, match="hand model"):
+        ContactGrasp("g", cfg, models, PredictSettings(steer=steer), torch.device("cpu"), None)
+    with pytest.raises(ValueError, match="contact_scale"):
+        ContactGrasp("g", {"contact": "ground_truth", "grasp": "gd"}, models,
+                     PredictSettings(steer={"contact_scale": 1.0}), torch.device("cpu"), hand32)

@@ -7,7 +7,10 @@ Keys of the method block: ``contact``, a contact component (``sample_contact``: 
 component's maps may be smoothed (``settings.contact_smoothing``: each value the mean over its k nearest
 points); ground-truth maps never are. Without maps, the stored maps are those the sampled hands make on
 the object (the map shards' contact map, at their ``alpha_contact``). With ``settings.steer`` (beyond the
-paper) the grasp generator's sampling is guided out of the scene at both poses (:mod:`tohgs.models.guidance`).
+paper) the grasp generator's sampling is guided out of the scene at both poses, the contact diffuser's off the
+object points near the scene, and more grasps may be sampled than kept: the best by the same energy, picked
+for diversity (:mod:`tohgs.models.guidance`; the stored ``seconds`` gain ``select``, the diagnostics the
+candidates' and the kept grasps' mean energy).
 """
 
 from __future__ import annotations
@@ -17,9 +20,10 @@ import time
 import numpy as np
 import torch
 
+from tohgs.geometry.cloud import even_subset
 from tohgs.geometry.hand_object import contact_values
 from tohgs.methods.base import Method, Prediction, gt_rows
-from tohgs.models.guidance import GuidanceSettings
+from tohgs.models.guidance import GraspEnergy, GuidanceSettings, select_diverse
 
 GROUND_TRUTH = "ground_truth"
 NO_CONTACT = "none"
@@ -58,38 +62,81 @@ class ContactGrasp(Method):
         if src == NO_CONTACT and self.hand is None:
             raise ValueError(f"method {self.name!r}: without maps the stored maps are the hands'; the job needs the hand model")
         self.steer = GuidanceSettings(**self.settings.steer)
-        if self.steer.active:
-            self.require_hand("guided sampling (settings.steer) poses hands")
+        if self.steer.active and not hasattr(self.grasp_model, "set_hand"):
+            raise ValueError(f"method {self.name!r}: settings.steer guides a GraspDiffuser's sampling; its grasp "
+                             f"model {self.cfg['grasp']!r} is not one (set steer.scale 0)")
+        if self.steer.contact_active and not (self.contact_model is not None
+                                              and hasattr(self.contact_model, "schedule")):
+            raise ValueError(f"method {self.name!r}: steer.contact_scale guides a ContactDiffuser's sampling; its "
+                             f"contact source {src!r} is not one (set steer.contact_scale 0)")
+        if self.steer.active or self.steer.selects:
+            self.require_hand("guided sampling and sample-score-keep (settings.steer) pose hands")
 
     def _steer(self) -> dict:
         """The guidance arguments of ``sample_grasps``: none unless ``settings.steer`` is active (a grasp
         model without guidance, e.g. a CVAE, is then never asked for it)."""
         return {"steer": self.steer, "hand": self.hand} if self.steer.active else {}
 
+    def _contact(self, batch, shard, row, generator) -> torch.Tensor | None:
+        """(B, N) contact maps for the batch (B copies of one configuration): sampled by the contact component
+        (guided by ``steer.contact_scale``) and smoothed, or the configuration's ground truth cycled to B; None
+        for a configuration without ground truth."""
+        s = self.settings
+        if self.contact_model is not None:
+            extra = {}
+            if self.steer.contact_active:
+                extra = {"steer": self.steer, "distance_alpha": float(shard.attrs.get("alpha_distance", 30.0))}
+            contact = self.contact_model.sample_contact(batch, s.sampler, s.steps, generator, **extra)
+            return smooth_contact(batch.points[0], contact, s.contact_smoothing)
+        ids = gt_rows(shard, row)
+        if len(ids) == 0:
+            return None
+        return torch.as_tensor(shard.contact[ids[np.arange(batch.size) % len(ids)]], device=batch.device)
+
+    def _select(self, batch, contact: torch.Tensor, grasp: torch.Tensor, keep: int
+                ) -> tuple[torch.Tensor, torch.Tensor, dict[str, float]]:
+        """``keep`` of the candidates (sample, score, keep): each scored by the guidance energy of its grasp
+        (with its own contact map), then :func:`select_diverse`. Returns the kept maps, grasps and the mean
+        energy of all candidates and of the kept ones."""
+        energy, verts = [], []
+        sub = even_subset(self.hand.rest_vertices.shape[0], self.steer.hand_points or 256, grasp.device)
+        with torch.no_grad():
+            for i in range(0, grasp.shape[0], keep):  # one chunk of S at a time: the energy's distance matrices
+                part = batch.index(torch.arange(i, min(i + keep, grasp.shape[0]), device=grasp.device))
+                part = part.with_contact(contact[i:i + keep])
+                energy.append(GraspEnergy.of_batch(self.hand, part, self.steer)(grasp[i:i + keep]))
+                verts.append(self.hand(grasp[i:i + keep]).vertices[:, sub])
+        energy, verts = torch.cat(energy), torch.cat(verts)
+        idx = select_diverse(energy, verts, keep, self.steer.pool)
+        info = {"energy_candidates": float(energy.mean()), "energy_kept": float(energy[idx].mean())}
+        return contact[idx], grasp[idx], info
+
     def predict(self, batch, shard, row, generator, rng) -> Prediction | None:
         s = self.settings
         t0 = time.perf_counter()
+        if self.steer.selects:  # candidates x S copies of the configuration
+            batch = batch.index(torch.zeros(s.samples * self.steer.candidates, dtype=torch.long, device=batch.device))
         if self.cfg["contact"] == NO_CONTACT:
             grasp = self.grasp_model.sample_grasps(batch, s.sampler, s.steps, generator, s.guidance, **self._steer())
             t1 = time.perf_counter()
             with torch.no_grad():
                 contact, _ = contact_values(batch.points, self.hand(grasp).vertices, float(shard.attrs.get("alpha_contact", 100.0)))
-            return Prediction(contact.cpu().numpy().astype(np.float32), grasp.cpu().numpy().astype(np.float64),
-                              {"grasp": t1 - t0, "contact_map": time.perf_counter() - t1})
-        if self.contact_model is not None:
-            contact = self.contact_model.sample_contact(batch, s.sampler, s.steps, generator)
-            contact = smooth_contact(batch.points[0], contact, s.contact_smoothing)
+            seconds = {"grasp": t1 - t0, "contact_map": time.perf_counter() - t1}
         else:
-            ids = gt_rows(shard, row)
-            if len(ids) == 0:
+            contact = self._contact(batch, shard, row, generator)
+            if contact is None:
                 return None
-            contact = torch.as_tensor(shard.contact[ids[np.arange(s.samples) % len(ids)]], device=batch.device)
-        t1 = time.perf_counter()
-        grasp = self.grasp_model.sample_grasps(batch.with_contact(contact), s.sampler, s.steps, generator, s.guidance,
-                                               **self._steer())
-        t2 = time.perf_counter()
+            t1 = time.perf_counter()
+            grasp = self.grasp_model.sample_grasps(batch.with_contact(contact), s.sampler, s.steps, generator,
+                                                   s.guidance, **self._steer())
+            seconds = {"contact_map": t1 - t0, "grasp": time.perf_counter() - t1}
+        info = {}
+        if self.steer.selects:
+            t2 = time.perf_counter()
+            contact, grasp, info = self._select(batch, contact, grasp, s.samples)
+            seconds["select"] = time.perf_counter() - t2
         return Prediction(contact.cpu().numpy().astype(np.float32), grasp.cpu().numpy().astype(np.float64),
-                          {"contact_map": t1 - t0, "grasp": t2 - t1})
+                          seconds, info=info)
 
 
 METHOD = ContactGrasp

@@ -18,6 +18,7 @@ from torch import nn
 from tohgs.data.batch import Batch
 from tohgs.models.component import Component
 from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, TimeMLP, sample
+from tohgs.models.guidance import GuidanceSettings, contact_guidance_step, near_scene_weights
 from tohgs.models.pointnet2 import PointNet2, PointNet2Config
 
 
@@ -110,11 +111,19 @@ class ContactDiffuser(Component):
         return {"loss": nn.functional.mse_loss(self(x_t, t, self.batch_condition(batch)), target)}
 
     @torch.no_grad()
-    def sample_contact(self, batch: Batch, sampler: str, steps: int, generator: torch.Generator) -> torch.Tensor:
-        """(B, N) contact maps in [0, 1] for the batch's scenes (one reverse process per sample)."""
+    def sample_contact(self, batch: Batch, sampler: str, steps: int, generator: torch.Generator,
+                       steer: GuidanceSettings | None = None, distance_alpha: float = 30.0) -> torch.Tensor:
+        """(B, N) contact maps in [0, 1] for the batch's scenes (one reverse process per sample); with a
+        ``steer`` whose ``contact_scale`` is positive, each guided step's x0 moves contact off the object
+        points near the scene at either pose (:func:`tohgs.models.guidance.contact_guidance_step`; the distance
+        maps' ``distance_alpha``, 1/m, says how near)."""
         cond = self.batch_condition(batch)
+        guide = None
+        if steer is not None and steer.contact_active:
+            guide = contact_guidance_step(near_scene_weights(batch.d_init, batch.d_goal, steer.near, distance_alpha), steer,
+                                          self.schedule.timesteps)
         x = sample(lambda xt, tt: self(xt, tt, cond), tuple(batch.points.shape[:2]), self.diffusion, sampler, steps,
-                   generator, batch.device)
+                   generator, batch.device, guide)
         return (x.clamp(-1, 1) + 1) / 2
 
 

@@ -31,10 +31,23 @@ metres); never the evaluation's meshes:
 
 All weights 0 (or ``scale`` 0) is no guidance: :func:`guidance_step` gives the sampler no guide, so the
 samples are exactly the unguided ones.
+
+Two more levers, each off by default:
+
+- **Guided contact sampling** (``contact_scale``): ContactDiffuser's x0 estimate (the map ``2 c - 1``) moves
+  by ``contact_scale * w / ||w||`` at the guided steps, down the energy ``sum_i w_i c_i`` whose weight
+  ``w_i`` in [0, 1] grows from 0 at ``near`` metres to 1 at the scene from an object point's distance map at
+  the initial or the goal pose, whichever is closer (:func:`near_scene_weights`): contact moves off the
+  points a hand could only touch from inside the scene (:func:`contact_guidance_step`).
+- **Sample, score, keep** (``candidates``): ``candidates x S`` grasps are sampled, each scored by the
+  energy above, and S kept by :func:`select_diverse`: among the lowest-energy ``pool`` fraction (at
+  least S), a farthest-point pick in the evaluation's diversity distance (the summed per-vertex distance of
+  two hands), starting at the lowest energy.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -58,6 +71,10 @@ class GuidanceSettings:
         max_depth: deeper penetrations are not counted (cloud edges), m.
         alpha: the contact map's sharpness (the maps' alpha, 1/m).
         hand_points: vertices used by the penetration terms (evenly spread; 0: all).
+        contact_scale: length of the normalised step on ContactDiffuser's x0 per guided step; 0: none.
+        near: object points closer to the scene than this at either pose are steered off, m.
+        candidates: grasps sampled per kept grasp (1: no selection).
+        pool: the lowest-energy fraction of the candidates the diverse pick chooses from.
     """
 
     scale: float = 0.0
@@ -70,6 +87,10 @@ class GuidanceSettings:
     max_depth: float = 0.05
     alpha: float = 100.0
     hand_points: int = 0
+    contact_scale: float = 0.0
+    near: float = 0.02
+    candidates: int = 1
+    pool: float = 0.5
 
     def __post_init__(self):
         if self.scale < 0 or not 0 <= self.start <= 1:
@@ -78,6 +99,9 @@ class GuidanceSettings:
             raise ValueError(f"guidance weights must be non-negative, got {self.weights}")
         if self.margin < 0 or self.max_depth <= 0 or self.alpha <= 0 or self.hand_points < 0:
             raise ValueError("guidance needs margin >= 0, max_depth > 0, alpha > 0 and hand_points >= 0")
+        if self.contact_scale < 0 or self.near <= 0 or self.candidates < 1 or not 0 < self.pool <= 1:
+            raise ValueError(f"guidance needs contact_scale >= 0, near > 0, candidates >= 1 and pool in (0, 1], got "
+                             f"{self.contact_scale}, {self.near}, {self.candidates}, {self.pool}")
 
     @property
     def weights(self) -> dict[str, float]:
@@ -87,6 +111,21 @@ class GuidanceSettings:
     def active(self) -> bool:
         """Whether guidance changes anything (a positive scale and a positive weight)."""
         return self.scale > 0 and self.start > 0 and max(self.weights.values()) > 0
+
+    @property
+    def contact_active(self) -> bool:
+        """Whether ContactDiffuser's sampling is guided (a positive ``contact_scale`` and ``start``)."""
+        return self.contact_scale > 0 and self.start > 0
+
+    @property
+    def selects(self) -> bool:
+        """Whether more grasps are sampled than kept (``candidates > 1``)."""
+        return self.candidates > 1
+
+    @property
+    def changes_sampling(self) -> bool:
+        """Whether any lever is on (otherwise the method samples exactly as without ``steer``)."""
+        return self.active or self.contact_active or self.selects
 
 
 class GraspEnergy:
@@ -171,3 +210,83 @@ def guidance_step(decode: Callable[[torch.Tensor], torch.Tensor], energy: Callab
         return torch.where(norm > eps, settings.scale * g / norm.clamp(min=eps), torch.zeros_like(g))
 
     return guide
+
+
+def near_scene_weights(d_init: torch.Tensor, d_goal: torch.Tensor, near: float, alpha: float = 30.0) -> torch.Tensor:
+    """(B, N) weights in [0, 1] of object points by their nearness to the scene at either pose: 0 at
+    ``near`` metres or farther, 1 at the scene, linear in the distance map's value in between.
+
+    Args:
+        d_init, d_goal: (B, N) distance maps ``1 - 2 (sigmoid(alpha d) - 0.5)`` to the initial and goal
+            scene (:mod:`tohgs.data.maps`), in [0, 1] (1 at the scene).
+        near: the distance (m) at which the weight reaches 0.
+        alpha: the maps' sharpness, 1/m.
+    """
+    at_near = 1.0 - 2.0 * (torch.sigmoid(torch.tensor(alpha * near, dtype=torch.float64)) - 0.5)
+    d = torch.maximum(d_init, d_goal)
+    return ((d - float(at_near)) / (1.0 - float(at_near))).clamp(0.0, 1.0)
+
+
+def contact_guidance_step(weights: torch.Tensor, settings: GuidanceSettings, timesteps: int, eps: float = 1e-8
+                          ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor | None] | None:
+    """The ``guide`` of ContactDiffuser's sampler: at the guided steps the (B, N) shift
+    ``contact_scale * w / ||w||`` of the x0 estimate (the map ``2 c - 1``), the normalised gradient of
+    ``sum_i w_i c_i`` (linear in x0, so the gradient is ``w / 2`` wherever x0 is); a sample with no point near
+    the scene is not moved. None without :attr:`GuidanceSettings.contact_active`.
+
+    Args:
+        weights: (B, N) :func:`near_scene_weights`.
+        settings: ``contact_scale`` and ``start``.
+        timesteps: the schedule's T.
+    """
+    if not settings.contact_active:
+        return None
+    t_max = settings.start * timesteps
+    norm = weights.norm(dim=1, keepdim=True)
+    shift = torch.where(norm > eps, settings.contact_scale * weights / norm.clamp(min=eps), torch.zeros_like(weights))
+
+    def guide(x0: torch.Tensor, t: torch.Tensor) -> torch.Tensor | None:
+        return None if float(t.max()) > t_max else shift.to(x0)
+
+    return guide
+
+
+def hand_distances(vertices: torch.Tensor) -> torch.Tensor:
+    """(K, K) the evaluation's diversity distance of K hands: the summed per-vertex L2 distance, m.
+
+    Args:
+        vertices: (K, V, 3) hand vertices, m.
+    """
+    k = vertices.shape[0]
+    flat = vertices.reshape(k, 1, -1, 3)
+    return torch.stack([(flat[i] - vertices).norm(dim=-1).sum(-1) for i in range(k)])
+
+
+def select_diverse(energy: torch.Tensor, vertices: torch.Tensor, keep: int, pool: float) -> torch.Tensor:
+    """Indices of ``keep`` of K candidates: the lowest-energy ``max(keep, ceil(pool * K))`` form the pool,
+    and from it a farthest-point pick in :func:`hand_distances` starting at the lowest energy (each next
+    candidate the one farthest from those picked; ties to the lower energy).
+
+    Args:
+        energy: (K,) candidates' energies (lower is better).
+        vertices: (K, V, 3) their hands' vertices (any even subset), m.
+        keep: how many to keep, at most K.
+        pool: the fraction of the candidates, by energy, the pick chooses from, in (0, 1].
+
+    Returns:
+        (keep,) long indices into the candidates, in pick order.
+    """
+    k = energy.shape[0]
+    if not 0 < keep <= k:
+        raise ValueError(f"cannot keep {keep} of {k} candidates")
+    size = min(k, max(keep, math.ceil(pool * k)))
+    order = torch.argsort(energy, stable=True)[:size]  # the pool, lowest energy first
+    dist = hand_distances(vertices[order])
+    picked = [0]
+    nearest = dist[0].clone()
+    for _ in range(keep - 1):
+        nearest[picked] = -1.0
+        nxt = int(torch.argmax(nearest))  # the first maximum: the lowest energy among ties
+        picked.append(nxt)
+        nearest = torch.minimum(nearest, dist[nxt])
+    return order[torch.as_tensor(picked, device=order.device)]

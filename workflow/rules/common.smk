@@ -266,8 +266,9 @@ def method_settings(wildcards):
     its kind reads (so a sampler setting leaves the dataset row's draw be)."""
     settings = _overlaid(config["prediction"], METHODS[wildcards.method]["settings"])
     keys = _SETTING_KEYS[METHODS[wildcards.method]["kind"]]
-    if not settings.get("steer", {}).get("scale", 0):
-        settings.pop("steer", None)  # guidance off: the faithful sampler's settings, as before it existed
+    steer = settings.get("steer", {})
+    if not (steer.get("scale", 0) or steer.get("contact_scale", 0) or steer.get("candidates", 1) > 1):
+        settings.pop("steer", None)  # every lever off: the faithful sampler's settings, as before it existed
     return _canonical({k: v for k, v in settings.items() if keys is None or k in keys})
 
 
