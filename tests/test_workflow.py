@@ -473,6 +473,35 @@ def test_a_method_and_a_table_added_by_config_alone_run_through_prediction_evalu
     assert _stale_jobs(smoke_run) == {}
 
 
+def test_the_guided_overlay_adds_its_rows_claims_and_comparison_figure_without_retraining(smoke_run):
+    """config/guided.yaml over the smoke config: the guided rows (and the GT-contact row the smoke tables
+    leave out) are predicted and evaluated with the smoke run's trained components, the faithful row is not
+    rerun, the guided table holds every row for every task, the stores record the steer settings and the
+    selection, and the comparison figure is drawn."""
+    from tohgs.data.predictions import read_predictions
+
+    ours = smoke_run / "results/predictions/placing/ours.zarr"
+    before = ours.stat().st_mtime
+    targets = ["results/tables/guided.csv", "results/figures/compare_guided_placing.png"]
+    cmd = [sys.executable, "-m", "snakemake", "--cores", "2", *targets, "--configfile", ".test/config/config.yaml",
+           "config/guided.yaml"]
+    dry = subprocess.run([*cmd, "-n", "--quiet", "rules"], cwd=smoke_run, capture_output=True, text=True, timeout=600,
+                         env=_env(smoke_run))
+    assert dry.returncode == 0, dry.stderr[-3000:]
+    assert job_stats(dry.stdout + dry.stderr) == {"predict": 9, "evaluate": 9, "table": 1, "comparison_figure": 1}
+    run = subprocess.run(cmd, cwd=smoke_run, capture_output=True, text=True, timeout=1200, env=_env(smoke_run))
+    assert run.returncode == 0, (run.stdout + run.stderr)[-4000:]
+    table = pd.read_csv(smoke_run / "results/tables/guided.csv")
+    labels = ["Ours", "Ours (GT contact)", "Ours + guided", "Ours + guided, keep 1/2"]
+    assert list(table.method) == labels * 3 and table.ts.notna().all()
+    arrays, attrs = read_predictions(smoke_run / "results/predictions/placing/ours-guided-keep.zarr")
+    assert attrs["config"]["steer"]["candidates"] == 2 and "seconds_per_select" in attrs["timing"]
+    assert len(attrs["diagnostics"]["energy_kept"]) == len(arrays["object_id"])
+    assert (smoke_run / targets[1]).stat().st_size > 10_000
+    assert ours.stat().st_mtime == before
+    assert _stale_jobs(smoke_run) == {}
+
+
 def test_a_second_seed_adds_replicas_and_the_table_pools_them(smoke_run):
     """``seeds: [0, 1]``: a table of the Dataset row needs only its seed-1 replica's prediction and
     evaluation (the first seed's outputs stay as they were); the table pools both seeds' grasps and gives

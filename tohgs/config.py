@@ -216,8 +216,10 @@ def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -
         if m not in cfg["methods"]:
             raise ConfigError(f"config key 'evaluation.robust_sd.methods': {m!r} is not a method (methods: "
                               f"{', '.join(sorted(cfg['methods']))})")
-    for key in ("methods", "contact_methods"):
-        for m in cfg["figures"][key]:
+    named = {key: cfg["figures"][key] for key in ("methods", "contact_methods")}
+    named.update({f"comparisons.{k}": v for k, v in cfg["figures"].get("comparisons", {}).items()})
+    for key, methods in named.items():
+        for m in methods:
             if m not in cfg["methods"]:
                 raise ConfigError(f"config key 'figures.{key}': {m!r} is not a method (methods: "
                                   f"{', '.join(sorted(cfg['methods']))})")

@@ -224,6 +224,7 @@ COMPONENT_NAME, METHOD_NAME, TABLE_NAME = _names(COMPONENTS), _names(METHODS), _
 def used_methods():
     """The methods a table or the figures use, in first-use order: only these are predicted."""
     names = [m for t in TABLES.values() for m in t["rows"]] + [*config["figures"]["contact_methods"], *config["figures"]["methods"]]
+    names += [m for ms in config["figures"]["comparisons"].values() for m in ms]
     out = []
     for m in names:  # with the methods they are of (kind filtered), first
         chain = [m]
@@ -384,7 +385,8 @@ def final_outputs():
         "results/figures/contact_maps.png",
     ] + [f"results/tables/{t}.csv" for t in TABLES] + claims_outputs() + prediction_outputs() + [
         f"results/models/{task}/checks.json" for task in tasks if checked_components()] + [
-        f"results/figures/{kind}_{task}.png" for task in tasks for kind in ("scenes", "predictions")]
+        f"results/figures/{kind}_{task}.png" for task in tasks for kind in ("scenes", "predictions")] + [
+        f"results/figures/compare_{name}_{task}.png" for task in tasks for name in config["figures"]["comparisons"]]
 
 
 def catalog_outputs(wildcards):
