@@ -49,3 +49,28 @@ def test_backbone_shapes_gradients_and_translation_invariance():
         other, _ = net(torch.rand(3, 256, 3) * 0.1, feats)
     assert (l1 - l2).abs().median() < 1e-5 < (l1 - other).abs().median()
     torch.testing.assert_close(g1, g2, atol=1e-2, rtol=1e-2)
+
+
+def test_a_prefix_of_a_farthest_point_order_samples_to_itself_and_the_backbone_skips_the_loop():
+    """Farthest-point sampling from index 0 of the first m points of a farthest-point order returns them in
+    order, so the levels after the first take their centres as a prefix: the same outputs as sampling anew,
+    bit for bit."""
+    g = torch.Generator().manual_seed(3)
+    for n, m, k in ((500, 128, 32), (300, 64, 64), (1000, 256, 17)):
+        xyz = torch.rand(4, n, 3, generator=g)
+        first = gather(xyz, farthest_point_sample(xyz, m))
+        assert torch.equal(farthest_point_sample(first, k), torch.arange(k).expand(4, k))
+    torch.manual_seed(0)
+    cfg = PointNet2Config(in_channels=2, sa=((64, 0.05, 8, (16, 32)), (16, 0.1, 8, (32, 64)), (0, 0.0, 0, (64, 96))),
+                          fp=((64,), (64,), (48,)))
+    net = PointNet2(cfg).eval()
+    xyz, feats = torch.rand(3, 256, 3, generator=g) * 0.1, torch.rand(3, 256, 2, generator=g)
+    with torch.no_grad():
+        local, glob = net(xyz, feats)
+        x1, f1 = net.sa[0](xyz, feats)
+        x2, f2 = net.sa[1](x1, f1, ordered=False)  # sampled anew
+        x2o, f2o = net.sa[1](x1, f1, ordered=True)
+    assert torch.equal(x2, x2o) and torch.equal(f2, f2o)
+    with torch.no_grad():  # more centres asked than points: the loop, as before
+        xs, _ = net.sa[0](xyz[:, :40], feats[:, :40], ordered=True)
+    assert xs.shape == (3, 64, 3)

@@ -75,15 +75,25 @@ class SetAbstraction(nn.Module):
         self.npoint, self.radius, self.nsample = npoint, radius, nsample
         self.mlp = _mlp([in_channels + 3, *mlp])
 
-    def forward(self, xyz: torch.Tensor, feats: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
-        """(B, N, 3), (B, N, C) -> centres (B, S, 3), features (B, S, mlp[-1])."""
+    def forward(self, xyz: torch.Tensor, feats: torch.Tensor | None, ordered: bool = False
+                ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(B, N, 3), (B, N, C) -> centres (B, S, 3), features (B, S, mlp[-1]).
+
+        ``ordered``: the points are already in farthest-point order from their first (a previous level's
+        centres), so the centres are their first ``npoint`` (farthest-point sampling from index 0 of a prefix
+        of a farthest-point order gives that prefix back: each next point was the farthest of the whole
+        cloud, so also of the prefix; the orders agree unless two distances tie exactly) and the sequential
+        sampling loop is skipped."""
         if self.npoint == 0:
             centre = xyz.mean(1, keepdim=True)
             grouped = (xyz - centre)[:, None]
             if feats is not None:
                 grouped = torch.cat([grouped, feats[:, None]], -1)
             return centre, self.mlp(grouped).max(2).values
-        centres = gather(xyz, farthest_point_sample(xyz.detach(), self.npoint))
+        if ordered and self.npoint <= xyz.shape[1]:
+            centres = xyz[:, : self.npoint]
+        else:
+            centres = gather(xyz, farthest_point_sample(xyz.detach(), self.npoint))
         idx = ball_query(self.radius, self.nsample, xyz.detach(), centres.detach())
         grouped = gather(xyz, idx) - centres[:, :, None]  # (B, S, K, 3)
         if feats is not None:
@@ -155,8 +165,8 @@ class PointNet2(nn.Module):
 
     def forward(self, xyz: torch.Tensor, feats: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         xyzs, fs = [xyz], [feats]
-        for sa in self.sa:
-            x, f = sa(xyzs[-1], fs[-1])
+        for level, sa in enumerate(self.sa):  # a level after a sampled one reads centres in farthest-point order
+            x, f = sa(xyzs[-1], fs[-1], ordered=level > 0 and self.sa[level - 1].npoint > 0)
             xyzs.append(x)
             fs.append(f)
         global_feat = fs[-1][:, 0]
