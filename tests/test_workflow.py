@@ -18,6 +18,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 import yaml
@@ -476,8 +477,8 @@ def test_a_method_and_a_table_added_by_config_alone_run_through_prediction_evalu
 def test_the_guided_overlay_adds_its_rows_claims_and_comparison_figure_without_retraining(smoke_run):
     """config/guided.yaml over the smoke config: the guided rows (and the GT-contact row the smoke tables
     leave out) are predicted and evaluated with the smoke run's trained components, the faithful row is not
-    rerun, the guided table holds every row for every task, the stores record the steer settings and the
-    selection, and the comparison figure is drawn."""
+    rerun, the guided table holds every row for every task, the stores record the steer settings, guidance
+    changes the grasps (and contact steering the maps) of the same seed, and the comparison figure is drawn."""
     from tohgs.data.predictions import read_predictions
 
     ours = smoke_run / "results/predictions/placing/ours.zarr"
@@ -492,11 +493,18 @@ def test_the_guided_overlay_adds_its_rows_claims_and_comparison_figure_without_r
     run = subprocess.run(cmd, cwd=smoke_run, capture_output=True, text=True, timeout=1200, env=_env(smoke_run))
     assert run.returncode == 0, (run.stdout + run.stderr)[-4000:]
     table = pd.read_csv(smoke_run / "results/tables/guided.csv")
-    labels = ["Ours", "Ours (GT contact)", "Ours + guided", "Ours + guided, keep 1/2"]
+    labels = ["Ours", "Ours (GT contact)", "Ours + guided", "Ours + guided, contact steered"]
     assert list(table.method) == labels * 3 and table.ts.notna().all()
-    arrays, attrs = read_predictions(smoke_run / "results/predictions/placing/ours-guided-keep.zarr")
-    assert attrs["config"]["steer"]["candidates"] == 2 and "seconds_per_select" in attrs["timing"]
-    assert len(attrs["diagnostics"]["energy_kept"]) == len(arrays["object_id"])
+    steered = {}
+    for name in ("ours", "ours-guided", "ours-guided-contact"):
+        arrays, attrs = read_predictions(smoke_run / f"results/predictions/placing/{name}.zarr")
+        steered[name] = attrs["config"]["steer"], arrays
+    assert steered["ours"][0] == {} and steered["ours-guided"][0]["scale"] == 0.1
+    assert steered["ours-guided-contact"][0]["contact_scale"] == 1.0
+    # Same seed and models: guidance changes the grasps, contact steering the maps too.
+    assert not np.allclose(steered["ours"][1]["grasp_init"], steered["ours-guided"][1]["grasp_init"])
+    assert np.array_equal(steered["ours"][1]["contact"], steered["ours-guided"][1]["contact"])
+    assert not np.array_equal(steered["ours"][1]["contact"], steered["ours-guided-contact"][1]["contact"])
     assert (smoke_run / targets[1]).stat().st_size > 10_000
     assert ours.stat().st_mtime == before
     assert _stale_jobs(smoke_run) == {}
