@@ -302,8 +302,8 @@ def test_select_diverse_equals_a_plain_greedy_pick_and_spreads_more_than_the_low
 
     lowest = np.argsort(energy, kind="stable")[:keep].tolist()
     assert spread(idx) > 2 * spread(lowest)
-    assert select_diverse(torch.as_tensor(energy), torch.as_tensor(verts), keep, 0.01).tolist() == lowest[:1] + \
-        _reference_pick(energy, verts, keep, 0.01)[1:]
+    small = select_diverse(torch.as_tensor(energy), torch.as_tensor(verts), keep, 0.01).tolist()
+    assert sorted(small) == sorted(lowest) and small[0] == lowest[0]  # a pool of S: the S lowest, reordered
     with pytest.raises(ValueError, match="cannot keep"):
         select_diverse(torch.as_tensor(energy), torch.as_tensor(verts), k + 1, 0.5)
 

@@ -122,11 +122,6 @@ class GuidanceSettings:
         """Whether more grasps are sampled than kept (``candidates > 1``)."""
         return self.candidates > 1
 
-    @property
-    def changes_sampling(self) -> bool:
-        """Whether any lever is on (otherwise the method samples exactly as without ``steer``)."""
-        return self.active or self.contact_active or self.selects
-
 
 class GraspEnergy:
     """The guidance energy of (B, 51) network-frame grasps for one batch's objects and scenes.
