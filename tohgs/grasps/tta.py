@@ -16,7 +16,7 @@ independent; the official code generated one grasp at a time):
   their squared distances to it, times 120.
 
 The point sums are scaled to the official 3000 points. Optimiser: SGD with momentum (the official lr
-6.25e-6, momentum 0.8, 300 steps; all settings, the laptop default 100 steps). After every step the finger numbers are clamped to the
+6.25e-6, momentum 0.8, 300 steps; all settings, the laptop default 50 steps). After every step the finger numbers are clamped to the
 hand's joint limits (the official MANO PCA space needed no clamp; our 45 axis-angle numbers do).
 
 The nearest hand vertex of each object point (for the contact map and the inside test) can be searched
@@ -45,7 +45,7 @@ OFFICIAL_POINTS = 3000  # the official code's object points: the point sums are 
 class TTASettings:
     """The adaptation's optimiser and weights (module docstring); ``steps`` 0 returns the input."""
 
-    steps: int = 100  # the paper's 300 (config/paper.yaml)
+    steps: int = 50  # the paper's 300 (config/paper.yaml)
     lr: float = 6.25e-6
     momentum: float = 0.8
     w_contact: float = 1.0

@@ -13,11 +13,13 @@ if str(REPO) not in sys.path:  # parse time only; jobs import the installed pack
     sys.path.insert(0, str(REPO))
 
 from tohgs.code_inputs import code_inputs
-from tohgs.config import ConfigError, add_seed_replicas, load_schema, method_setting_keys, validate_config
+from tohgs.config import (ConfigError, add_seed_replicas, load_schema, method_setting_keys, settings_from,
+                          validate_config)
 from tohgs.assets.objects import check_split_sizes, read_catalog
 from tohgs.assets.sources import select_objects, task_set
 from tohgs.methods import method_components
 from tohgs.models import CHECKED_KINDS
+from tohgs.models.guidance_settings import GuidanceSettings
 
 _SCHEMA = load_schema()
 try:
@@ -267,10 +269,16 @@ def method_settings(wildcards):
     its kind reads (so a sampler setting leaves the dataset row's draw be)."""
     settings = _overlaid(config["prediction"], METHODS[wildcards.method]["settings"])
     keys = _SETTING_KEYS[METHODS[wildcards.method]["kind"]]
-    steer = settings.get("steer", {})
-    if not (steer.get("scale", 0) or steer.get("contact_scale", 0) or steer.get("candidates", 1) > 1):
+    if not settings_from(GuidanceSettings, settings.get("steer")).changes_sampling:
         settings.pop("steer", None)  # every lever off: the faithful sampler's settings, as before it existed
     return _canonical({k: v for k, v in settings.items() if keys is None or k in keys})
+
+
+def figure_methods(wildcards):
+    """The methods of a predictions figure: ``figures.methods``, or comparison ``name``'s of
+    ``figures.comparisons`` (rule comparison_figure)."""
+    name = wildcards.get("name")
+    return config["figures"]["methods"] if name is None else config["figures"]["comparisons"][name]
 
 
 def method_block(wildcards):

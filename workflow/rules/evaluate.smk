@@ -82,7 +82,7 @@ rule claims:
 
 rule predictions_figure:
     input:
-        predictions=expand("results/predictions/{{task}}/{method}.zarr", method=config["figures"]["methods"]),
+        predictions=lambda w: expand("results/predictions/{task}/{method}.zarr", task=w.task, method=figure_methods(w)),
         scenes=test_scene_stores,
         objects=object_dirs(),
         supports="results/objects/supports",
@@ -93,7 +93,7 @@ rule predictions_figure:
         code=code("predictions_figure.py"),
         objects_dir=objects_dir_of_supports,
         configs=setting("figures", "prediction_configs"),
-        labels=lambda w: [METHODS[m]["label"] for m in config["figures"]["methods"]],
+        labels=lambda w: [METHODS[m]["label"] for m in figure_methods(w)],
     conda:
         "../envs/tohgs.yaml"
     log:
@@ -102,27 +102,12 @@ rule predictions_figure:
         "../scripts/predictions_figure.py"
 
 
-rule comparison_figure:
-    input:
-        predictions=lambda w: expand("results/predictions/{task}/{method}.zarr", task=w.task,
-                                     method=config["figures"]["comparisons"][w.name]),
-        scenes=test_scene_stores,
-        objects=object_dirs(),
-        supports="results/objects/supports",
-        hand="results/hand/hand.npz",
+# figures.comparisons: the same figure of the comparison's methods (figure_methods reads the name)
+use rule predictions_figure as comparison_figure with:
     output:
         report("results/figures/compare_{name}_{task}.png", caption="../report/predictions.rst", category="Evaluation"),
-    params:
-        code=code("predictions_figure.py"),
-        objects_dir=objects_dir_of_supports,
-        configs=setting("figures", "prediction_configs"),
-        labels=lambda w: [METHODS[m]["label"] for m in config["figures"]["comparisons"][w.name]],
-    conda:
-        "../envs/tohgs.yaml"
     log:
         "logs/figures/compare_{name}_{task}.log",
-    script:
-        "../scripts/predictions_figure.py"
 
 
 rule contact_maps_figure:
