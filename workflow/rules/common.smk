@@ -286,6 +286,12 @@ def method_block(wildcards):
     return _canonical({k: v for k, v in METHODS[wildcards.method].items() if k != "label"})
 
 
+# Job priorities (Snakemake's ``priority:``): the data stages first, then the trainings, then the predictions;
+# the evaluation, tables and figures last. Without them the scheduler mixes stages freely on few cores, and
+# one object's prior grasps, scheduled late, left a task's trainings to the last 4 of the smoke run's 11 minutes.
+PRIORITY = {"data": 30, "train": 20, "predict": 10}
+
+
 TORCH_RULES = ("prior_synthesis", "train", "predict")  # the rules that can run on a GPU
 
 

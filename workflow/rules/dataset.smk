@@ -17,6 +17,7 @@ rule task_grasps:
         settings=setting("task_grasps"),
     resources:
         **rule_resources("task_grasps"),
+    priority: PRIORITY["data"]
     conda:
         "../envs/tohgs.yaml"
     log:
@@ -43,6 +44,7 @@ rule maps:
         seed=setting("seed"),
     resources:
         **rule_resources("maps"),
+    priority: PRIORITY["data"]
     conda:
         "../envs/tohgs.yaml"
     log:

@@ -21,6 +21,7 @@ rule prior_synthesis:
     threads: config["prior_grasps"]["threads"]
     resources:
         **rule_resources("prior_synthesis"),
+    priority: PRIORITY["data"]
     conda:
         "../envs/tohgs.yaml"
     log:
@@ -41,6 +42,7 @@ rule prior_filter:
         thresholds=setting("prior_grasps", "filter"),
     resources:
         **rule_resources("prior_filter"),
+    priority: PRIORITY["data"]
     conda:
         "../envs/tohgs.yaml"
     log:

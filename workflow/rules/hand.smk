@@ -11,6 +11,7 @@ rule hand_model:
         model=setting("hand", "model"),
         mano_path=setting("hand", "mano_path"),
         cache_dir=setting("cache_dir"),
+    priority: PRIORITY["data"]
     conda:
         "../envs/tohgs.yaml"
     log:

@@ -16,6 +16,7 @@ rule prepare_object:
         cache_dir=setting("cache_dir"),
     resources:
         **rule_resources("prepare_object"),
+    priority: PRIORITY["data"]
     conda:
         "../envs/tohgs.yaml"
     log:
@@ -36,6 +37,7 @@ checkpoint catalog:
         split=setting("objects", "split"),
         seed=setting("seed"),
         task_sets=TASK_SETS,
+    priority: PRIORITY["data"]
     conda:
         "../envs/tohgs.yaml"
     log:
@@ -51,6 +53,7 @@ rule supports:
         code=code("supports.py"),
         table=setting("objects", "supports", "table"),
         shelves=setting("objects", "supports", "shelves"),
+    priority: PRIORITY["data"]
     conda:
         "../envs/tohgs.yaml"
     log:

@@ -15,6 +15,7 @@ rule scenes:
         seed=setting("seed"),
     resources:
         **rule_resources("scenes"),
+    priority: PRIORITY["data"]
     conda:
         "../envs/tohgs.yaml"
     log:

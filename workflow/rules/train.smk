@@ -16,6 +16,7 @@ rule train:
     threads: config["training"]["threads"]
     resources:
         **rule_resources("train"),
+    priority: PRIORITY["train"]
     conda:
         "../envs/tohgs.yaml"
     log:
@@ -41,6 +42,7 @@ rule predict:
     threads: config["prediction"]["threads"]
     resources:
         **rule_resources("predict"),
+    priority: PRIORITY["predict"]
     conda:
         "../envs/tohgs.yaml"
     log:
