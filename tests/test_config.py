@@ -173,3 +173,31 @@ def test_every_network_key_has_description_and_default():
     for kind, sub in schema["$defs"]["networks"].items():
         for parts, leaf in iter_schema_keys(sub):
             assert "description" in leaf and "default" in leaf, f"$defs.networks.{kind}.{'.'.join(parts)}"
+
+
+def test_an_import_without_ground_truth_leaves_out_exactly_the_rows_that_read_it(default_config):
+    """drop_ground_truth_rows: the Dataset row (kind reference), the GT-contact rows (contact: ground_truth)
+    and a filtered method of one of them become pending rows with the reason, under the table's own label;
+    every other row stays, in order; a table of ground-truth rows only is refused."""
+    from tohgs.config import drop_ground_truth_rows
+    from tohgs.methods import reads_ground_truth
+
+    cfg = copy.deepcopy(default_config)
+    validate_config(cfg)  # the defaults filled in
+    cfg["methods"]["f-gt"] = {"label": "F-GT", "kind": "filtered", "of": "m-grasptta-gt", "settings": {}}
+    cfg["tables"]["table2"]["rows"].append("f-gt")
+    cfg["figures"]["comparisons"] = {"gt": ["dataset"], "mixed": ["ours", "ours-gt-contact"]}
+    assert [m for m in cfg["methods"] if reads_ground_truth(m, cfg["methods"])] == [
+        "dataset", "ours-gt-contact", "m-grasptta-gt", "f-gt"]
+    dropped = drop_ground_truth_rows(cfg, "no truth here")
+    assert dropped == ["dataset", "ours-gt-contact", "m-grasptta-gt", "f-gt"]
+    assert cfg["tables"]["table1"]["rows"] == ["grasptta", "f-grasptta", "contactgen", "scenediffuser", "flex", "ours"]
+    assert cfg["tables"]["table1"]["pending"] == [{"label": "Dataset", "reason": "no truth here"},
+                                                  {"label": "Ours (GT contact)", "reason": "no truth here"}]
+    assert cfg["tables"]["table2"]["rows"] == ["m-grasptta-oc", "m-grasptta-ta", "cc-gd", "ours"]
+    assert [p["label"] for p in cfg["tables"]["table2"]["pending"]] == ["M-GraspTTA (GT)", "Ours (GT)", "F-GT"]
+    assert cfg["tables"]["table4"]["rows"] == ["m-grasptta-ta", "ours"]
+    assert cfg["figures"]["comparisons"] == {"mixed": ["ours"]}
+    cfg["tables"]["truth"] = {"rows": ["dataset"], "pending": []}
+    with pytest.raises(ConfigError, match="tables.truth.rows"):
+        drop_ground_truth_rows(cfg, "no truth here")

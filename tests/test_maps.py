@@ -186,3 +186,29 @@ def test_rotation_augmentation_rotates_the_hand_mesh(built):
     assert not np.allclose(turned[0]["points"], turned[1]["points"])  # a new rotation per item
     tests = MapDataset([tmp / "shard-0.zarr"], per="config")
     assert len(tests) == 2 and "grasp" not in tests[0]
+
+
+
+class _Store:
+    """A scene-store stand-in: its ``object``, ``attrs`` and number of configurations."""
+
+    def __init__(self, name: str, n: int, attrs: dict) -> None:
+        self.object, self.attrs, self._n = name, attrs, n
+
+    def __len__(self) -> int:
+        return self._n
+
+
+def test_an_official_test_store_offers_the_configurations_its_evaluation_uses():
+    """An imported Shelving test store records the configurations the official evaluation uses (every tenth
+    from the 51st): the test split takes the first ``test_configs`` of those; other stores offer all."""
+    from tohgs.data.build_maps import evaluation_candidates
+
+    shelving = _Store("off-a", 83, {"official": {"evaluated": list(range(50, 83, 10))}})
+    n = {"off-a": evaluation_candidates(shelving), "b": evaluation_candidates(_Store("b", 5, {}))}
+    assert n == {"off-a": [50, 60, 70, 80], "b": 5}
+    assert shard_items(n, "test", 3, 1, 0) == [("b", 0), ("b", 1), ("b", 2),
+                                              ("off-a", 50), ("off-a", 60), ("off-a", 70)]
+    assert shard_items(n, "test", 3, 2, 1) == [("b", 1), ("off-a", 50), ("off-a", 70)]
+    # a store too short for the official choice (none evaluated) offers all its configurations
+    assert evaluation_candidates(_Store("off-c", 4, {"official": {"evaluated": []}})) == 4

@@ -350,3 +350,42 @@ def settings_from(cls, values: Mapping[str, Any] | None):
     if unknown:
         raise ValueError(f"{cls.__name__}: unknown settings {sorted(unknown)}")
     return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+
+
+def drop_ground_truth_rows(cfg: dict[str, Any], reason: str) -> list[str]:
+    """Take, in place, every method that reads ground-truth task grasps (:func:`tohgs.methods.reads_ground_truth`)
+    out of a validated config's tables (each becomes a ``pending`` row of the table with ``reason``) and
+    figures: for test configurations without ground truth (an official import's). Returns the methods taken
+    out, in first-use order.
+
+    Raises:
+        ConfigError: a table whose every row reads ground truth.
+    """
+    from tohgs.methods import reads_ground_truth
+
+    meths = cfg["methods"]
+    dropped: list[str] = []
+    for name, table in cfg["tables"].items():
+        gt = [m for m in table["rows"] if reads_ground_truth(m, meths)]
+        if not gt:
+            continue
+        if len(gt) == len(table["rows"]):
+            raise ConfigError(f"config key 'tables.{name}.rows': every row reads ground-truth grasps, which the "
+                              f"test configurations do not have ({reason})")
+        table["rows"] = [m for m in table["rows"] if m not in gt]
+        labels = table.get("labels", {})
+        table["pending"] = [*table.get("pending", []),
+                            *({"label": labels.get(m, meths[m]["label"]), "reason": reason} for m in gt)]
+        dropped += [m for m in gt if m not in dropped]
+    figures = cfg["figures"]
+    for key in ("methods", "contact_methods"):
+        dropped += [m for m in figures[key] if reads_ground_truth(m, meths) and m not in dropped]
+        figures[key] = [m for m in figures[key] if not reads_ground_truth(m, meths)]
+    for key, methods in list(figures.get("comparisons", {}).items()):
+        dropped += [m for m in methods if reads_ground_truth(m, meths) and m not in dropped]
+        kept = [m for m in methods if not reads_ground_truth(m, meths)]
+        if kept:
+            figures["comparisons"][key] = kept
+        else:  # a comparison of ground-truth rows only has nothing to show
+            del figures["comparisons"][key]
+    return dropped

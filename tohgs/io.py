@@ -104,6 +104,20 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         raise
 
 
+def copy_atomic(src: str | Path, dst: str | Path) -> None:
+    """Copy the file or folder ``src`` to ``dst`` atomically (:func:`atomic_path`, :func:`atomic_dir`): a reader
+    sees the old ``dst`` or the whole copy, never a part. Raises FileNotFoundError naming a missing ``src``."""
+    src = Path(src)
+    if src.is_dir():
+        with atomic_dir(dst) as tmp:
+            shutil.copytree(src, tmp, dirs_exist_ok=True)
+    elif src.is_file():
+        with atomic_path(dst) as tmp:
+            shutil.copyfile(src, tmp)
+    else:
+        raise FileNotFoundError(f"{src}: no such file or folder to copy")
+
+
 def content_key(*parts: Any) -> str:
     """A cache key by content: the sha256 of arrays (dtype, shape and bytes) and JSON-able values, in order."""
     import numpy as np

@@ -1,7 +1,8 @@
 """Build map shards from scene stores and task grasps (the dataset stage's workhorse).
 
 The configurations of one task and split (all of them for train and validation objects, the first
-``test_configs`` of each test object) are listed in a fixed order (object name, then configuration) and
+``test_configs`` of each test object: of those the official evaluation uses, for an official import's Shelving
+test store) are listed in a fixed order (object name, then configuration) and
 dealt round-robin to ``n_shards`` shards, so each shard is one independent job. Per configuration:
 
 - the object cloud: ``n_points`` area-weighted surface samples of the target with normals (drawn once per
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import zlib
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -46,14 +48,33 @@ class MapSettings:
     scene_radius: float = 0.25  # m around the target's two positions; 0 = the whole scene (the paper)
 
 
-def shard_items(n_configs: dict[str, int], split: str, test_configs: int, n_shards: int, shard: int
+def shard_items(n_configs: dict[str, int | Sequence[int]], split: str, test_configs: int, n_shards: int, shard: int
                 ) -> list[tuple[str, int]]:
-    """``(object, configuration)`` pairs of shard ``shard`` of ``n_shards`` (round-robin over the sorted list)."""
+    """``(object, configuration)`` pairs of shard ``shard`` of ``n_shards`` (round-robin over the sorted list).
+
+    ``n_configs``: per object its number of configurations (all of them are candidates), or the candidate
+    configurations' indices in order (an official test store's evaluated ones); a test split takes the first
+    ``test_configs`` candidates of each object."""
     if not 0 <= shard < n_shards:
         raise ValueError(f"shard {shard} out of range 0..{n_shards - 1}")
-    items = [(name, c) for name in sorted(n_configs)
-             for c in range(min(n_configs[name], test_configs) if split == "test" else n_configs[name])]
+    candidates = {name: range(n) if isinstance(n, int) else list(n) for name, n in n_configs.items()}
+    items = [(name, c) for name in sorted(candidates)
+             for c in (candidates[name][:test_configs] if split == "test" else candidates[name])]
     return items[shard::n_shards]
+
+
+def evaluation_candidates(scenes) -> int | list[int]:
+    """The configurations of a scene store that a test split may use: those the official evaluation uses
+    (attrs ``official.evaluated``: Shelving's every tenth from the 51st) when the store records them, else
+    all (the number of configurations)."""
+    evaluated = (scenes.attrs.get("official") or {}).get("evaluated")
+    if evaluated is None:
+        return len(scenes)
+    if not evaluated:
+        log.warning("%s: the official evaluation uses none of its %d test configurations (range(50, n, 10)); "
+                    "all are candidates", scenes.object, len(scenes))
+        return len(scenes)
+    return [int(c) for c in evaluated]
 
 
 class EmptySplitError(ValueError):
@@ -86,7 +107,8 @@ def make_map_shard(task: str, split: str, shard: int, n_shards: int, scene_store
     Args:
         task, split: the task and the split (``train``, ``val`` or ``test``).
         scene_stores, task_grasp_stores: the scene and task-grasp stores of the split's target objects
-            (the same objects; their order does not matter).
+            (the same objects; their order does not matter). A test split may have no task-grasp stores at
+            all (an official import's test configurations): its shards then hold no grasps.
         objects_dir, supports_json: the objects stage's outputs.
         hand: the hand's assets (contact maps pose it with :meth:`~tohgs.hand.assets.HandAssets.vertices`;
             the job imports no torch).
@@ -113,11 +135,15 @@ def make_map_shard(task: str, split: str, shard: int, n_shards: int, scene_store
         if attrs.get("task") != task:
             raise ValueError(f"{p}: task grasps of {attrs.get('task')!r}, expected {task!r}")
         grasps[attrs["object"]], grasp_attrs[attrs["object"]] = arrays, attrs
-    if set(grasps) != set(scenes):
+    no_truth = split == "test" and not task_grasp_stores
+    if no_truth:
+        log.info("%s/%s: no task-grasp stores: the test configurations have no ground-truth grasps", task, split)
+    elif set(grasps) != set(scenes):
         raise ValueError(f"{task}/{split}: scene stores of {sorted(scenes)} but task grasps of {sorted(grasps)}")
     if split == "train" and scenes and not any(len(g["config"]) for g in grasps.values()):
         raise EmptySplitError(empty_split_message(task, split, grasp_attrs, grasps))
-    items = shard_items({o: len(sc) for o, sc in scenes.items()}, split, test_configs, n_shards, shard)
+    candidates = {o: evaluation_candidates(sc) if split == "test" else len(sc) for o, sc in scenes.items()}
+    items = shard_items(candidates, split, test_configs, n_shards, shard)
     vocab = sorted(scenes)
     wrist = np.asarray(hand.rest_joints[0], dtype=np.float64)
     clouds: dict[str, tuple[np.ndarray, np.ndarray]] = {}
@@ -154,8 +180,8 @@ def make_map_shard(task: str, split: str, shard: int, n_shards: int, scene_store
         cfg_rows["scene_normals"].append(cloud_normals)
         cfg_rows["centroid"].append(centroid)
         cfg_rows["goal_transform"].append(T_goal @ np.linalg.inv(T_init))
-        g = grasps[name]
-        sel = np.flatnonzero(g["config"] == c)
+        g = grasps.get(name)
+        sel = np.flatnonzero(g["config"] == c) if g is not None else np.zeros(0, np.int64)
         if s.max_grasps_per_config > 0:
             sel = sel[: s.max_grasps_per_config]
         if len(sel):

@@ -30,7 +30,7 @@ grasped_pose7]``) and ``recon_parms`` (sic). Test JSON: the same scene keys per 
 ``grasps/task/<task>/<name>.zarr``          task-grasp stores: the rows' grasps
 ``test_scenes/<task>/<name>.zarr``          scene stores of the test JSONs' configurations, in order
 ``checksums.sha256``                        SHA-256 of every file read (``sha256sum -c`` format)
-``import_report.json``                      counts, and every unreadable or missing file with its reason
+``import_report.json``                      counts, the hand, the splits per task, every unusable file
 ==========================================  ======================================================
 
 **Frames.** tohgs's world has the table's top at z = 0 and every object's mesh frame at its centre of mass;
@@ -257,16 +257,24 @@ class ImportReport:
         tasks: per task ``files``, ``rows`` (grasps), ``configurations``, ``test_files``,
             ``test_configurations``, ``targets``.
         objects: ``ok`` and ``rejected`` object counts.
+        hand: the name of the hand whose rest wrist carried each grasp to its goal pose (``anny``, ``mano``):
+            a workflow that consumes the import must use the same hand.
+        splits: per task ``{"train", "val", "test"}``, the tohgs names of the targets whose stores were
+            written, from the task's ``train.txt`` (``train``), ``val.txt`` (``val``: their grasp files)
+            and ``test/*.json`` (``test``: the evaluation's configurations); targets with a rejected mesh
+            are left out (their stores are written, reported as a problem).
     """
 
     root: str
     out: str
+    hand: str = ""
     table_top: float = TABLE_HEIGHT
     files_read: int = 0
     problems: list[dict[str, str]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     tasks: dict[str, dict[str, int]] = field(default_factory=dict)
     objects: dict[str, int] = field(default_factory=lambda: {"ok": 0, "rejected": 0})
+    splits: dict[str, dict[str, list[str]]] = field(default_factory=dict)
 
     @property
     def n_problems(self) -> int:
@@ -685,7 +693,7 @@ def import_official(root: str | Path, out: str | Path, hand: HandAssets, tasks: 
     if bad:
         raise ValueError(f"unknown tasks {bad} (expected some of {list(TASKS)})")
     decomposition = decomposition or DecompositionSettings()
-    reader, report = _Reader(root), ImportReport(str(root), str(out))
+    reader, report = _Reader(root), ImportReport(str(root), str(out), hand=hand.name)
     table_top, table_size = _table(reader, report)
     report.table_top = table_top
     frame = _Frame(table_top)
@@ -751,7 +759,10 @@ def import_official(root: str | Path, out: str | Path, hand: HandAssets, tasks: 
     # 3. The stores: rows with grasps per target; test configurations per target, in the JSON's order.
     # A grasp file holds one target (the file's object); a test JSON names its targets, so two could clash.
     written: dict[Path, str] = {}
-    for task, rel, _, rows, test in loaded:
+    accepted = {m["name"] for m in metas if m["status"] == "ok"}
+    for task in tasks:
+        report.splits[task] = {"train": [], "val": [], "test": []}
+    for task, rel, split, rows, test in loaded:
         stats = report.tasks[task]
         for target in sorted({r.target for r in rows}):
             mine = [r for r in rows if r.target == target]
@@ -772,6 +783,15 @@ def import_official(root: str | Path, out: str | Path, hand: HandAssets, tasks: 
                 stats["configurations"] += n_configs
                 stats["rows"] += n_grasps
                 stats["targets"] += 1
+            name = object_name(target, task == "stacking")
+            if name in accepted:
+                report.splits[task]["test" if test else split].append(name)
+            else:
+                report.problem(rel, "mesh", f"target '{target}' has no accepted mesh: its configurations are "
+                                            "left out of the splits")
+    for task_splits in report.splits.values():
+        for k in task_splits:
+            task_splits[k] = sorted(set(task_splits[k]))
 
     report.files_read = len(reader.digests)
     lines = [f"{d}  {p}\n" for p, d in sorted(reader.digests.items())]
@@ -780,6 +800,52 @@ def import_official(root: str | Path, out: str | Path, hand: HandAssets, tasks: 
     write_json(out / "import_report.json", report.to_dict())
     log.info("official import: %d files read, %d problems, %s", report.files_read, report.n_problems, report.tasks)
     return report
+
+
+@dataclass(frozen=True)
+class ImportedDataset:
+    """What a workflow needs to know of an import before it runs (config ``official.import_dir``).
+
+    Attributes:
+        root: the import's folder (``out`` of :func:`import_official`).
+        objects: every object of the catalog (accepted or rejected), by tohgs name.
+        hand: the hand the import used (:attr:`ImportReport.hand`).
+        splits: per imported task ``{"train", "val", "test"}``: target names (:attr:`ImportReport.splits`).
+        n_problems: the files the import could not use.
+    """
+
+    root: Path
+    objects: tuple[str, ...]
+    hand: str
+    splits: dict[str, dict[str, list[str]]]
+    n_problems: int
+
+    def targets(self, task: str) -> list[str]:
+        """The targets of ``task`` with scene and task-grasp stores (the train and val splits)."""
+        return sorted({*self.splits[task]["train"], *self.splits[task]["val"]})
+
+
+def read_import(root: str | Path) -> ImportedDataset:
+    """The description of an import folder (its ``import_report.json`` and ``objects/catalog.csv``).
+
+    Raises:
+        FileNotFoundError: the folder has no report or catalog (naming the command that writes them).
+        ValueError: a report without the hand or the splits (written by an older tohgs: import again).
+    """
+    import pandas as pd
+
+    root = Path(root)
+    report_path, catalog_path = root / "import_report.json", root / "objects" / "catalog.csv"
+    for p in (report_path, catalog_path):
+        if not p.is_file():
+            raise FileNotFoundError(f"{p}: not found; write the import first: python -m tohgs.data.official "
+                                    f"import <official root> {root}")
+    report = json.loads(report_path.read_text())
+    if not report.get("hand") or not isinstance(report.get("splits"), dict):
+        raise ValueError(f"{report_path}: no 'hand' or 'splits' (an import by an older tohgs): import again")
+    catalog = pd.read_csv(catalog_path, usecols=["name"])
+    return ImportedDataset(root, tuple(sorted(catalog.name)), report["hand"], report["splits"],
+                           int(report.get("n_problems", 0)))
 
 
 # --- the exporter ----------------------------------------------------------------------------------------

@@ -39,3 +39,21 @@ def method_components(method: Mapping[str, Any], components: Mapping[str, Any]) 
         if key not in NOT_COMPONENT_KEYS and isinstance(value, str) and value in components and value not in out:
             out.append(value)
     return out
+
+
+#: The fixed source of a method key that reads the test configurations' own task grasps (their contact maps).
+GROUND_TRUTH = "ground_truth"
+#: Method kinds whose predictions are the test configurations' own task grasps (the Dataset row).
+GROUND_TRUTH_KINDS = ("reference",)
+
+
+def reads_ground_truth(name: str, methods: Mapping[str, Mapping[str, Any]]) -> bool:
+    """Whether method ``name`` (a key of ``methods``, the config's block) needs the test configurations'
+    ground-truth task grasps: a kind of :data:`GROUND_TRUTH_KINDS`, a key set to :data:`GROUND_TRUTH`, or a
+    method it is ``of`` (kind filtered) that does."""
+    block = methods[name]
+    if block["kind"] in GROUND_TRUTH_KINDS:
+        return True
+    if any(v == GROUND_TRUTH for k, v in block.items() if k not in NOT_COMPONENT_KEYS):
+        return True
+    return "of" in block and reads_ground_truth(block["of"], methods)

@@ -22,10 +22,10 @@ import torch
 
 from tohgs.geometry.cloud import even_subset
 from tohgs.geometry.hand_object import contact_values
+from tohgs.methods import GROUND_TRUTH
 from tohgs.methods.base import Method, Prediction, gt_rows
 from tohgs.models.guidance import GraspEnergy, GuidanceSettings, select_diverse
 
-GROUND_TRUTH = "ground_truth"
 NO_CONTACT = "none"
 
 

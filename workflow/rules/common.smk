@@ -13,10 +13,11 @@ if str(REPO) not in sys.path:  # parse time only; jobs import the installed pack
     sys.path.insert(0, str(REPO))
 
 from tohgs.code_inputs import code_inputs
-from tohgs.config import (ConfigError, add_seed_replicas, load_schema, method_setting_keys, settings_from,
-                          validate_config)
+from tohgs.config import (ConfigError, add_seed_replicas, drop_ground_truth_rows, load_schema, method_setting_keys,
+                          settings_from, validate_config)
 from tohgs.assets.objects import check_split_sizes, read_catalog
 from tohgs.assets.sources import select_objects, task_set
+from tohgs.data.official import read_import
 from tohgs.methods import method_components
 from tohgs.models import CHECKED_KINDS
 from tohgs.models.guidance_settings import GuidanceSettings
@@ -30,16 +31,44 @@ except ConfigError as err:
 # The task sets the configured tasks draw their targets from (bricks for stacking, objects otherwise).
 TASK_SETS = sorted({task_set(t) for t in config["scenes"]["tasks"]})
 
+# The official dataset's import (config official.import_dir), or None: generated data.
+OFFICIAL = config["official"]["import_dir"]
+IMPORTED = None
+# The rules that generate data (rules/objects.smk, scenes.smk, grasps.smk); with an import they are not defined.
+GENERATION_RULES = ("prepare_object", "scenes", "prior_synthesis", "prior_filter", "prior_summary", "prior_figure",
+                    "task_grasps")
+
 SKIPPED_FILES = []  # (file, reason) of user-folder files that cannot be used
-try:
-    OBJECTS = {spec.name: spec for spec in select_objects(config["objects"], config["seed"], skipped=SKIPPED_FILES)}
-    check_split_sizes(Counter(spec.task_set for spec in OBJECTS.values()), config["objects"]["split"], TASK_SETS)
-except (ValueError, FileNotFoundError) as err:
-    raise WorkflowError(f"invalid configuration: {err}") from None
+if OFFICIAL:
+    try:
+        IMPORTED = read_import(OFFICIAL)
+    except (ValueError, FileNotFoundError) as err:
+        raise WorkflowError(f"invalid configuration: config key 'official.import_dir': {err}") from None
+    _missing = [t for t in config["scenes"]["tasks"] if t not in IMPORTED.splits]
+    if _missing:
+        raise WorkflowError(f"invalid configuration: config key 'scenes.tasks': {', '.join(_missing)} not in the "
+                            f"import {OFFICIAL} (it has {', '.join(sorted(IMPORTED.splits))})")
+    if IMPORTED.hand != config["hand"]["model"]:
+        raise WorkflowError(f"invalid configuration: config key 'hand.model' is {config['hand']['model']!r} but the "
+                            f"import {OFFICIAL} carried its grasps with the {IMPORTED.hand!r} hand: import again "
+                            f"with --hand {config['hand']['model']} or set hand.model: {IMPORTED.hand}")
+    OBJECTS = dict.fromkeys(IMPORTED.objects)  # every object the import's catalog lists
+else:
+    try:
+        OBJECTS = {spec.name: spec for spec in select_objects(config["objects"], config["seed"], skipped=SKIPPED_FILES)}
+        check_split_sizes(Counter(spec.task_set for spec in OBJECTS.values()), config["objects"]["split"], TASK_SETS)
+    except (ValueError, FileNotFoundError) as err:
+        raise WorkflowError(f"invalid configuration: {err}") from None
 for _file, _reason in SKIPPED_FILES:
     print(f"objects.sources.dir: skipped {_file}: {_reason}", file=sys.stderr)
 
-OBJECT_NAME = "(pb|brick|dir)-[a-z0-9-]+"  # the {object} wildcard (see tohgs.assets.sources)
+
+def imported(path):
+    """``path`` (with wildcards) inside the official import's folder (config official.import_dir)."""
+    return os.path.join(OFFICIAL, path)
+
+
+OBJECT_NAME = "(pb|brick|dir|off)-[a-z0-9-]+"  # the {object} wildcard (tohgs.assets.sources, tohgs.data.official)
 
 
 def objects_dir_of_supports(wildcards, input):
@@ -142,9 +171,15 @@ def accepted_objects(task):
     return sorted(catalog[catalog.task_set == task_set(task)].name)
 
 
+def task_targets(task):
+    """The targets of ``task`` that have scene stores and task grasps: every accepted object of the task's set,
+    or with an import its targets of the official train and val lists."""
+    return IMPORTED.targets(task) if IMPORTED else accepted_objects(task)
+
+
 def scene_stores_of(task):
     """Every scene store of ``task``."""
-    return expand("results/scenes/{task}/{object}.zarr", task=task, object=accepted_objects(task))
+    return expand("results/scenes/{task}/{object}.zarr", task=task, object=task_targets(task))
 
 
 def scene_stores(wildcards):
@@ -172,17 +207,25 @@ SPLITS = ("train", "val", "test")
 
 
 def split_objects(wildcards):
-    """Accepted target objects of the task's set in the split (the catalog's split column)."""
+    """Accepted target objects of the task's set in the split (the catalog's split column); with an import, the
+    official split of the task (train.txt, val.txt, the test JSONs)."""
+    if IMPORTED:
+        return IMPORTED.splits[wildcards.task][wildcards.split]
     catalog = catalog_frame()
     sel = catalog[(catalog.task_set == task_set(wildcards.task)) & (catalog.split == wildcards.split)]
     return sorted(sel.name)
 
 
 def split_scene_stores(wildcards):
-    return expand("results/scenes/{task}/{object}.zarr", task=wildcards.task, object=split_objects(wildcards))
+    """The split's scene stores; with an import, the test split's are the official test configurations."""
+    folder = "test_scenes" if IMPORTED and wildcards.split == "test" else "scenes"
+    return expand(f"results/{folder}/{{task}}/{{object}}.zarr", task=wildcards.task, object=split_objects(wildcards))
 
 
 def split_task_grasps(wildcards):
+    """The split's task-grasp stores; none for an import's test split (its configurations have no grasps)."""
+    if IMPORTED and wildcards.split == "test":
+        return []
     return expand("results/grasps/task/{task}/{object}.zarr", task=wildcards.task, object=split_objects(wildcards))
 
 
@@ -197,8 +240,17 @@ def all_map_shards(wildcards):
 
 
 def all_task_grasps(wildcards):
-    return [f"results/grasps/task/{task}/{o}.zarr" for task in config["scenes"]["tasks"] for o in accepted_objects(task)]
+    return [f"results/grasps/task/{task}/{o}.zarr" for task in config["scenes"]["tasks"] for o in task_targets(task)]
 
+
+if IMPORTED:  # the official test configurations have no task grasps: no method that reads them can run
+    try:
+        _dropped = drop_ground_truth_rows(config, "the official test configurations have no ground-truth grasps")
+    except ConfigError as err:
+        raise WorkflowError(f"invalid configuration: {err}") from None
+    if _dropped:
+        print(f"official.import_dir: left out of the tables and figures (they read ground-truth grasps): "
+              f"{', '.join(_dropped)}", file=sys.stderr)
 
 # The seed replicas (config key seeds): every table row's method, and what it builds on, once per seed
 # but the first, as components and methods of their own (tohgs.config.add_seed_replicas).
@@ -225,7 +277,8 @@ COMPONENT_NAME, METHOD_NAME, TABLE_NAME = _names(COMPONENTS), _names(METHODS), _
 
 def used_methods():
     """The methods a table or the figures use, in first-use order: only these are predicted."""
-    names = [m for t in TABLES.values() for m in t["rows"]] + [*config["figures"]["contact_methods"], *config["figures"]["methods"]]
+    contact_figure = [] if IMPORTED else config["figures"]["contact_methods"]  # no contact maps' figure of an import
+    names = [m for t in TABLES.values() for m in t["rows"]] + [*contact_figure, *config["figures"]["methods"]]
     names += [m for ms in config["figures"]["comparisons"].values() for m in ms]
     out = []
     for m in names:  # with the methods they are of (kind filtered), first
@@ -392,12 +445,13 @@ def final_outputs():
         "results/objects/supports",
         "results/figures/objects.png",
         "results/figures/hand.png",
-        "results/grasps/prior/summary.csv",
-        "results/figures/prior_grasps.png",
         "results/maps/summary.csv",
         "results/figures/maps.png",
+    ] + ([] if IMPORTED else [  # an import has no prior grasps, and no truth for the contact maps' figure
+        "results/grasps/prior/summary.csv",
+        "results/figures/prior_grasps.png",
         "results/figures/contact_maps.png",
-    ] + [f"results/tables/{t}.csv" for t in TABLES] + claims_outputs() + prediction_outputs() + [
+    ]) + [f"results/tables/{t}.csv" for t in TABLES] + claims_outputs() + prediction_outputs() + [
         f"results/models/{task}/checks.json" for task in tasks if checked_components()] + [
         f"results/figures/{kind}_{task}.png" for task in tasks for kind in ("scenes", "predictions")] + [
         f"results/figures/compare_{name}_{task}.png" for task in tasks for name in config["figures"]["comparisons"]]

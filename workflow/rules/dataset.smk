@@ -1,29 +1,5 @@
-# The task-oriented dataset: task expansion per task and object, then distance and contact maps in
-# Zarr shards per task, split and shard (independent jobs), a summary and a picture.
-
-
-rule task_grasps:
-    input:
-        scenes="results/scenes/{task}/{object}.zarr",
-        prior="results/grasps/prior/{object}.zarr",
-        objects=object_dirs(),
-        supports="results/objects/supports",
-        hand="results/hand/hand.npz",
-    output:
-        directory("results/grasps/task/{task}/{object}.zarr"),
-    params:
-        code=code("task_grasps.py"),
-        objects_dir=objects_dir_of_supports,
-        settings=setting("task_grasps"),
-    resources:
-        **rule_resources("task_grasps"),
-    priority: PRIORITY["data"]
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/grasps/task/{task}/{object}.log",
-    script:
-        "../scripts/task_grasps.py"
+# The task-oriented dataset: distance and contact maps in Zarr shards per task, split and shard
+# (independent jobs) from the scene stores and task grasps, generated or imported; a summary and a picture.
 
 
 rule maps:

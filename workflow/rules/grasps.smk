@@ -1,5 +1,6 @@
 # The prior-grasp stage: force-closure synthesis and metrics per object (expensive), then the filter
-# (cheap, so a threshold change reruns only it), a per-object summary and a picture.
+# (cheap, so a threshold change reruns only it), a per-object summary and a picture; then the task
+# expansion per task and object (generated data; rules/official.smk has the imported task grasps).
 
 
 rule prior_synthesis:
@@ -83,3 +84,27 @@ rule prior_figure:
         "logs/figures/prior_grasps.log",
     script:
         "../scripts/prior_figure.py"
+
+
+rule task_grasps:
+    input:
+        scenes="results/scenes/{task}/{object}.zarr",
+        prior="results/grasps/prior/{object}.zarr",
+        objects=object_dirs(),
+        supports="results/objects/supports",
+        hand="results/hand/hand.npz",
+    output:
+        directory("results/grasps/task/{task}/{object}.zarr"),
+    params:
+        code=code("task_grasps.py"),
+        objects_dir=objects_dir_of_supports,
+        settings=setting("task_grasps"),
+    resources:
+        **rule_resources("task_grasps"),
+    priority: PRIORITY["data"]
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/grasps/task/{task}/{object}.log",
+    script:
+        "../scripts/task_grasps.py"

@@ -1,5 +1,5 @@
 # The objects stage: select, validate, normalise and decompose every object; the catalog with the
-# split by object; the table and shelves; a picture of the objects.
+# split by object; the table and shelves (generated data; rules/official.smk has the imported ones).
 
 
 rule prepare_object:
@@ -60,21 +60,3 @@ rule supports:
         "logs/objects/supports.log",
     script:
         "../scripts/supports.py"
-
-
-rule objects_figure:
-    input:
-        catalog="results/objects/catalog.csv",
-        objects=object_dirs(),
-    output:
-        report("results/figures/objects.png", caption="../report/objects.rst", category="Objects"),
-    params:
-        code=code("objects_figure.py"),
-        max_objects=setting("figures", "max_objects"),
-        seed=setting("seed"),
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/figures/objects.log",
-    script:
-        "../scripts/objects_figure.py"

@@ -1,5 +1,5 @@
-# The scenes stage: Placing, Stacking and Shelving configurations per task and target object, and a
-# picture per task.
+# The scenes stage: Placing, Stacking and Shelving configurations per task and target object (generated
+# data; rules/official.smk has the imported ones).
 
 
 rule scenes:
@@ -24,21 +24,3 @@ rule scenes:
         "results/benchmarks/scenes/{task}/{object}.tsv"
     script:
         "../scripts/scenes.py"
-
-
-rule scenes_figure:
-    input:
-        scenes=scene_stores,
-        supports="results/objects/supports",
-    output:
-        report("results/figures/scenes_{task}.png", caption="../report/scenes.rst", category="Scenes"),
-    params:
-        code=code("scenes_figure.py"),
-        objects_dir=objects_dir_of_supports,
-        max_configs=setting("figures", "scene_configs"),
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/figures/scenes_{task}.log",
-    script:
-        "../scripts/scenes_figure.py"

@@ -1,0 +1,37 @@
+# Pictures of the stages' inputs, generated or imported: the objects, and the scenes per task.
+
+
+rule objects_figure:
+    input:
+        catalog="results/objects/catalog.csv",
+        objects=object_dirs(),
+    output:
+        report("results/figures/objects.png", caption="../report/objects.rst", category="Objects"),
+    params:
+        code=code("objects_figure.py"),
+        max_objects=setting("figures", "max_objects"),
+        seed=setting("seed"),
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/figures/objects.log",
+    script:
+        "../scripts/objects_figure.py"
+
+
+rule scenes_figure:
+    input:
+        scenes=scene_stores,
+        supports="results/objects/supports",
+    output:
+        report("results/figures/scenes_{task}.png", caption="../report/scenes.rst", category="Scenes"),
+    params:
+        code=code("scenes_figure.py"),
+        objects_dir=objects_dir_of_supports,
+        max_configs=setting("figures", "scene_configs"),
+    conda:
+        "../envs/tohgs.yaml"
+    log:
+        "logs/figures/scenes_{task}.log",
+    script:
+        "../scripts/scenes_figure.py"
