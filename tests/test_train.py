@@ -117,3 +117,26 @@ def test_predictions_are_reproducible_and_carried_to_the_goal(trained):
     gt = predict("placing", "ours-gt-contact", OURS_GT, [tmp / "shard-0.zarr"], {"grasp_diffuser": paths["grasp_diffuser"]},
                  settings, out / "gt.zarr")
     np.testing.assert_array_equal(gt["contact"][0][0], sh.contact[np.flatnonzero(sh.grasp_config == 0)[0]])
+
+
+
+def test_a_configurations_predictions_do_not_depend_on_the_configurations_before_it(trained, built):  # noqa: F811
+    """Each configuration draws from its own streams (seed, object, configuration): configuration 1 predicted
+    after configuration 0 equals configuration 1 predicted alone (a shard of its own), and the two
+    configurations' samples differ."""
+    from tohgs.data.build_maps import make_map_shard
+
+    tmp, hand, out, paths = trained
+    _, _, _, kw, _ = built
+    both = make_map_shard(**{**kw, "split": "test", "n_shards": 1}, shard=0, out=out / "test-both.zarr")
+    alone = make_map_shard(**{**kw, "split": "test", "n_shards": 2}, shard=1, out=out / "test-alone.zarr")
+    assert list(both.config_index) == [0, 1] and list(alone.config_index) == [1]
+    settings = {"samples": 3, "sampler": "ddim", "steps": 4, "seed": 1, "device": "cpu"}
+    a = predict("placing", "ours", OURS, [out / "test-both.zarr"], paths, settings, out / "both.zarr")
+    b = predict("placing", "ours", OURS, [out / "test-alone.zarr"], paths, settings, out / "alone.zarr")
+    np.testing.assert_array_equal(b["config_index"], [1])
+    np.testing.assert_array_equal(a["grasp_init"][1], b["grasp_init"][0])
+    np.testing.assert_array_equal(a["contact"][1], b["contact"][0])
+    assert np.abs(a["grasp_init"][0] - a["grasp_init"][1]).max() > 1e-3
+    other = predict("placing", "ours", OURS, [out / "test-alone.zarr"], paths, {**settings, "seed": 2}, out / "seed2.zarr")
+    assert np.abs(other["grasp_init"][0] - b["grasp_init"][0]).max() > 1e-3, "the seed changes the draw"

@@ -85,7 +85,8 @@ class Method:
                 rng: np.random.Generator) -> Prediction | None:
         """The S predictions of one test configuration: ``batch`` is the configuration repeated S times
         (no contact, no grasp), ``shard`` / ``row`` where it lies (a ground-truth source reads them);
-        ``generator`` (torch) and ``rng`` (numpy) are the job's seeded streams. None: the configuration
+        ``generator`` (torch) and ``rng`` (numpy) are the configuration's seeded streams
+        (:func:`tohgs.methods.predict.configuration_streams`). None: the configuration
         cannot be predicted (e.g. ground-truth maps where it has no task grasp)."""
         raise NotImplementedError
 

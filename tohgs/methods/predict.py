@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 import logging
+import zlib
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -35,6 +36,15 @@ def method_class(kind: str) -> type[Method]:
     if not method_kind_exists(kind):
         raise ValueError(f"unknown method kind {kind!r} (known: {', '.join(method_kinds())})")
     return importlib.import_module(f"tohgs.methods.{kind}").METHOD
+
+
+def configuration_streams(seed: int, obj: str, config_index: int) -> tuple[torch.Generator, np.random.Generator]:
+    """The torch and numpy random streams of one test configuration's predictions, seeded by the job's
+    ``seed``, the object's name and the configuration's index in its scene store: a configuration's samples do
+    not depend on which configurations the job predicts before it (``maps.test_configs``, the shards)."""
+    key = [int(seed), zlib.crc32(obj.encode()), int(config_index)]
+    torch_seed = int(np.random.SeedSequence(key).generate_state(1, np.uint64)[0] >> np.uint64(1))
+    return torch.Generator().manual_seed(torch_seed), np.random.default_rng(key)
 
 
 def predict(task: str, name: str, method: dict[str, Any], test_shards: list[str | Path],
@@ -74,8 +84,6 @@ def predict(task: str, name: str, method: dict[str, Any], test_shards: list[str 
     runner = method_class(method["kind"])(name, method, models, s, device, hand_model,
                                           None if base is None else read_predictions(base))
     data = MapDataset(test_shards, per="config")
-    gen = torch.Generator().manual_seed(s.seed)
-    rng = np.random.default_rng(s.seed)
     rows: dict[str, list] = {k: [] for k in ("object_id", "config_index", "contact", "grasp_init", "grasp_goal", "kept")}
     diagnostics: dict[str, list[float]] = {}
     seconds: dict[str, float] = {}
@@ -86,6 +94,7 @@ def predict(task: str, name: str, method: dict[str, Any], test_shards: list[str 
         item = data[i]
         shard, c = data.shards[item["shard"]], item["row"]
         batch = Batch.collate([item], device).repeat(s.samples)
+        gen, rng = configuration_streams(s.seed, shard.attrs["objects"][int(item["object_id"])], int(item["config_index"]))
         pred = runner.predict(batch, shard, c, gen, rng)
         if pred is None:
             skipped += 1
