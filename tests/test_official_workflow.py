@@ -4,8 +4,8 @@ export back to the official test configurations.
 
 The run is the smoke config (``.test/config/config.yaml``) with :data:`OFFICIAL_CONFIG` layered over it:
 Placing only, Table 1 of the Dataset row (which the official test configurations cannot have: no
-ground-truth grasps) and Ours, and only Table 1 and the dataset summary are asked for (about 2.5 min on 2 CPU
-cores; docs/official_dataset.md).
+ground-truth grasps) and Ours, and only Table 1 and the dataset summary are asked for (46 s on 2 CPU cores
+in CI; docs/official_dataset.md).
 """
 
 from __future__ import annotations
