@@ -47,6 +47,29 @@ def object_mesh(objects_dir: str | Path, name: str) -> trimesh.Trimesh:
         raise ValueError(f"{path}: unreadable object mesh ({exc})") from exc
 
 
+COLLISION_MESH = "collision.obj"  # the convex decomposition's parts in an object's folder (one ``o`` group each)
+
+
+def collision_mesh(objects_dir: str | Path, name: str) -> trimesh.Trimesh:
+    """The convex parts of object ``name`` (``<objects_dir>/<name>/collision.obj``, its mesh frame, metres)
+    as one mesh: the parts' triangles side by side, overlaps and inner faces kept, as a decomposed mesh file
+    loads (the official evaluation voxelises this for PV).
+
+    Raises:
+        ValueError: the file is missing, unreadable or has no triangles (the message names it).
+    """
+    path = Path(objects_dir) / name / COLLISION_MESH
+    if not path.is_file():
+        raise ValueError(f"{path}: no collision parts (is '{name}' an accepted object of the objects stage?)")
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:
+        raise ValueError(f"{path}: unreadable collision parts ({exc})") from exc
+    if len(mesh.faces) == 0:
+        raise ValueError(f"{path}: collision parts without triangles")
+    return mesh
+
+
 class MeshError(ValueError):
     """A mesh that cannot be used; the message is the reason recorded in the catalog."""
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import zlib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -73,6 +74,11 @@ class Method:
             raise ValueError(f"method {self.name!r}: {why}; the prediction job needs the hand model")
         return self.hand
 
+    def ground_truth(self, shard: MapShard, row: int, count: int | None = None) -> np.ndarray:
+        """The ground-truth task grasps this method reads for configuration ``row`` (``count``, default S):
+        :func:`ground_truth_pick` with the job's seed, so every ground-truth row of a seed reads the same."""
+        return ground_truth_pick(shard, row, self.settings.samples if count is None else count, self.settings.seed)
+
     def model(self, key: str) -> torch.nn.Module:
         """The component the method key ``key`` names (a clear error when the job was not given it)."""
         comp = self.cfg.get(key)
@@ -94,3 +100,20 @@ class Method:
 def gt_rows(shard: MapShard, row: int) -> np.ndarray:
     """The task grasps (rows of the shard's grasp arrays) of configuration ``row``."""
     return np.flatnonzero(shard.grasp_config == row)
+
+
+def ground_truth_pick(shard: MapShard, row: int, count: int, seed: int) -> np.ndarray:
+    """(count,) the task grasps (rows of the shard's grasp arrays) that every ground-truth row reads for
+    configuration ``row``: its task grasps in a random order drawn from ``seed``, the object's name and the
+    configuration's index, cycled to ``count`` (a configuration with fewer grasps repeats them in turn);
+    empty for a configuration without task grasps. The ``Dataset`` row and the ground-truth-contact rows of a
+    seed thus evaluate the same grasps of the same configurations (paired rows)."""
+    ids = gt_rows(shard, row)
+    if len(ids) == 0:
+        return ids
+    name = shard.attrs["objects"][int(shard.object_id[row])]
+    rng = np.random.default_rng([int(seed), zlib.crc32(name.encode()), int(shard.config_index[row]), GROUND_TRUTH_STREAM])
+    return rng.permutation(ids)[np.arange(count) % len(ids)]
+
+
+GROUND_TRUTH_STREAM = 0x67  # the key of the ground-truth pick's stream, apart from a configuration's sampling streams

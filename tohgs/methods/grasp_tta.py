@@ -8,7 +8,7 @@ Keys of the method block:
 - ``contact_net``: a ``hand_contact`` component (ContactNet) for the adaptation's consistency term;
 - ``contact``: what the generator reads as its contact channel: ``none`` (GraspTTA, object-centric), a
   contact component (M-GraspTTA TA: ContactDiffuser's maps) or ``ground_truth`` (M-GraspTTA GT: the
-  configuration's own task-grasp maps, cycled to S).
+  configuration's own task-grasp maps: those the ``Dataset`` row evaluates, :func:`tohgs.methods.base.ground_truth_pick`).
 
 The prediction settings ``tta`` (:class:`tohgs.grasps.tta.TTASettings`) are this kind's. Per
 configuration the mean energy before and after the adaptation is recorded. Where the generator reads no
@@ -24,7 +24,7 @@ import torch
 
 from tohgs.config import settings_from
 from tohgs.grasps.tta import TTASettings, adapt
-from tohgs.methods.base import Method, Prediction, gt_rows
+from tohgs.methods.base import Method, Prediction
 from tohgs.methods.contact_grasp import GROUND_TRUTH, NO_CONTACT, smooth_contact
 
 
@@ -48,10 +48,10 @@ class GraspTTA(Method):
         if src == NO_CONTACT:
             return None
         if src == GROUND_TRUTH:
-            ids = gt_rows(shard, row)
+            ids = self.ground_truth(shard, row)
             if len(ids) == 0:
                 return torch.zeros(0)
-            return torch.as_tensor(shard.contact[ids[np.arange(s.samples) % len(ids)]], device=batch.device)
+            return torch.as_tensor(shard.contact[ids], device=batch.device)
         contact = self.contact_model.sample_contact(batch, s.sampler, s.steps, generator)
         return smooth_contact(batch.points[0], contact, s.contact_smoothing)
 

@@ -239,6 +239,10 @@ def all_map_shards(wildcards):
     return [p for task in config["scenes"]["tasks"] for p in map_shards_of(task)]
 
 
+def all_scene_stores(wildcards):
+    return [p for task in config["scenes"]["tasks"] for p in scene_stores_of(task)]
+
+
 def all_task_grasps(wildcards):
     return [f"results/grasps/task/{task}/{o}.zarr" for task in config["scenes"]["tasks"] for o in task_targets(task)]
 
@@ -356,6 +360,13 @@ def rule_resources(name):
     if name in TORCH_RULES and config["resources"]["gpu"]:
         r.update(gpu=1, gpu_manufacturer=config["resources"]["gpu_manufacturer"])
     return r
+
+
+def evaluation_sd_settings():
+    """SD's settings in the evaluation: the physics of ``metrics.sd`` with the gravity of
+    ``evaluation.sd_gravity`` (the prior grasps keep ``metrics.sd``'s own)."""
+    g = config["evaluation"]["sd_gravity"]
+    return _canonical({**config["metrics"]["sd"], "gravity_direction": g["direction"], "gravity": g["vector"]})
 
 
 def robust_sd_settings(wildcards):

@@ -14,10 +14,12 @@ rule evaluate:
     params:
         code=code("evaluate.py"),
         objects_dir=objects_dir_of_supports,
-        sd=setting("metrics", "sd"),
+        sd=evaluation_sd_settings(),
         voxel_pitch=setting("metrics", "voxel_pitch"),
         cache_dir=setting("cache_dir"),
         robust_sd=robust_sd_settings,
+        palm_sd=setting("evaluation", "palm_sd"),
+        pv_mesh=setting("evaluation", "pv_mesh"),
     threads: config["evaluation"]["threads"]
     resources:
         **rule_resources("evaluate"),
