@@ -263,3 +263,17 @@ def test_pv_voxelises_the_convex_parts_inner_faces_included_or_the_mesh(tmp_path
     assert len(parts) > len(whole) and inside.sum() > 500 and (np.abs(whole).max(1) < 0.018).sum() == 0
     with pytest.raises(ValueError, match="evaluation.pv_mesh"):
         _object_assets(tmp_path / "objects", "cube", 0.001, {}, pv_mesh="hull")
+
+
+def test_a_table_shows_the_papers_printed_values_next_to_the_runs():
+    rows = pd.concat([_rows([0.0], [0.0], [0.0], [0.0], method="dataset"), _rows([0.0], [0.0], [0.0], [0.0])])
+    t = metric_table(rows, ["placing"], ["dataset", "ours"], LABELS, ["qr", "ts"], QualityThresholds(),
+                     paper=["ts", "init_opp", "ds_per_vertex"])
+    assert list(t.columns) == ["task", "method", "qr", "ts", "paper_ts", "paper_init_opp", "paper_ds_per_vertex"]
+    ours = t.set_index("method").loc["Ours"]
+    assert ours.paper_ts == 0.563 and ours.paper_init_opp == 6.82  # the paper's Table 1, Placing
+    assert ours.paper_ds_per_vertex == pytest.approx(41.91 / 778 * 100)  # its DS over MANO's 778 vertices, cm
+    assert t.set_index("method").loc["Dataset"][["paper_ts", "paper_init_opp"]].isna().all()  # not in the paper
+    assert "| TS (paper) |" in markdown(t) and "| 0.563 |" in markdown(t)
+    with pytest.raises(ValueError, match="no column 'ds_total'"):
+        metric_table(rows, ["placing"], ["ours"], LABELS, ["qr"], QualityThresholds(), paper=["ds_total"])

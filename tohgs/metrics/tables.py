@@ -41,6 +41,8 @@ cannot be built yet, with the reason: they appear with empty cells (NaN) and the
 
 With a bootstrap (:mod:`tohgs.metrics.bootstrap`), each metric column ``c`` but the counts gets its
 interval as ``c_lo`` and ``c_hi`` in the frame (the CSV); the markdown writes ``value ± half-width``.
+A table's ``paper`` list adds the paper's printed Table 1 value of those metrics as ``paper_<c>`` columns
+(:mod:`tohgs.metrics.paper`), last.
 """
 
 from __future__ import annotations
@@ -53,6 +55,7 @@ import pandas as pd
 
 from tohgs.metrics.bootstrap import (INTERVAL_COLUMNS, BootstrapSettings, config_ds, config_keys, config_stats,
                                      intervals, palm_sd, resample_weights, robust_stats)
+from tohgs.metrics.paper import PAPER_METRICS, paper_value
 
 SEED_SPREAD_COLUMNS = ("qr", "ts")  # the columns whose spread across seeds the tables add
 METRIC_COLUMNS = ("pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "ds_per_vertex", "init_opp", "goal_opp",
@@ -65,6 +68,13 @@ _HEADERS = {"task": "Task", "method": "Method", "pv_avg": "PV avg (cm³)", "pv_s
             "ds_per_vertex": "DS/vertex (cm)", "sd_palm_avg": "SD palm (cm)", "qr_palm": "QR palm %",
             "discarded": "discarded", "sd_robust": "robust SD (cm)", "sd_pass": "SD pass %",
             "sd_unstable": "SD unstable %", "qr_seed_sd": "QR sd (seeds)", "ts_seed_sd": "TS sd (seeds)"}
+
+
+def _header(column: str) -> str:
+    """A column's markdown header: the paper's value of a metric reads "<header> (paper)"."""
+    if column.startswith("paper_") and column[6:] in PAPER_METRICS:
+        return f"{_HEADERS.get(column[6:], column[6:])} (paper)"
+    return _HEADERS.get(column, column)
 
 
 @dataclass(frozen=True)
@@ -157,9 +167,11 @@ def seed_spread(frame: pd.DataFrame, t: QualityThresholds, columns: list[str]) -
 
 def metric_table(rows: pd.DataFrame, tasks: list[str], methods: list[str], labels: dict[str, str],
                  columns: list[str], t: QualityThresholds, pending: list[str] = (),
-                 bootstrap: BootstrapSettings | None = None) -> pd.DataFrame:
+                 bootstrap: BootstrapSettings | None = None, paper: list[str] = ()) -> pd.DataFrame:
     """One row per task and method, in the given orders: ``task``, ``method`` (its label) and ``columns``;
-    then per task a row of NaN for each label of ``pending`` (methods not available yet). With a
+    then per task a row of NaN for each label of ``pending`` (methods not available yet); last, for each
+    of ``paper``, the paper's Table 1 value ``paper_<c>`` of the row's method (:mod:`tohgs.metrics.paper`;
+    NaN for a method the paper does not have). With a
     ``bootstrap`` of samples > 0, the intervals ``<c>_lo``, ``<c>_hi`` of the columns that have them; the
     resamples are drawn once per task, over every configuration of the task's rows, and shared by its
     methods. Rows of several seeds (column ``seed``, :func:`read_metrics`) are pooled, and QR's and TS's
@@ -172,6 +184,7 @@ def metric_table(rows: pd.DataFrame, tasks: list[str], methods: list[str], label
     several = "seed" in rows.columns and rows.seed.nunique() > 1
     spread = [c for c in columns if c in SEED_SPREAD_COLUMNS] if several else []
     bounds += [f"{c}_seed_sd" for c in spread]
+    bounds += [f"paper_{c}" for c in paper]
     out = []
     for task in tasks:
         in_task = rows[rows.task == task]
@@ -190,6 +203,7 @@ def metric_table(rows: pd.DataFrame, tasks: list[str], methods: list[str], label
                     row[f"{c}_lo"], row[f"{c}_hi"] = iv[c]
             if spread:
                 row.update({f"{c}_seed_sd": v for c, v in seed_spread(sel, t, spread).items()})
+            row.update({f"paper_{c}": paper_value(m, task, c) for c in paper})
             out.append(row)
         out += [{"task": task, "method": label, **dict.fromkeys([*columns, *bounds], float("nan"))} for label in pending]
     return pd.DataFrame(out, columns=["task", "method", *columns, *bounds])
@@ -216,7 +230,7 @@ def markdown(table: pd.DataFrame, digits: int = 3, notes: dict[str, str] | None 
     notes = notes or {}
     marks = {label: "*" * (k + 1) for k, label in enumerate(notes)}
     cols = [c for c in table.columns if not (c.endswith(("_lo", "_hi")) and c[:-3] in table.columns)]
-    lines = ["| " + " | ".join(_HEADERS.get(c, c) for c in cols) + " |", "|" + "---|" * len(cols)]
+    lines = ["| " + " | ".join(_header(c) for c in cols) + " |", "|" + "---|" * len(cols)]
     for _, r in table.iterrows():
         cells = []
         for c in cols:
@@ -224,7 +238,7 @@ def markdown(table: pd.DataFrame, digits: int = 3, notes: dict[str, str] | None 
             if c in COUNT_COLUMNS:
                 cells.append(str(int(v)) if np.isfinite(v) else "–")
             elif isinstance(v, (float, np.floating)):
-                fmt = f".{digits}f" if c in ("ts", "ds", "ts_seed_sd") else ".2f"
+                fmt = f".{digits}f" if c in ("ts", "ds", "ts_seed_sd", "paper_ts") else ".2f"
                 text = "–" if not np.isfinite(v) else format(v, fmt)
                 if np.isfinite(v) and f"{c}_lo" in table.columns and np.isfinite(r[f"{c}_lo"]):
                     text += " ± " + format((r[f"{c}_hi"] - r[f"{c}_lo"]) / 2, fmt)

@@ -47,6 +47,7 @@ rule table:
         labels=lambda w: {m: TABLES[w.table]["labels"].get(m, METHODS[m]["label"]) for m in TABLES[w.table]["rows"]},
         pending=lambda w: setting("tables", w.table, "pending"),
         columns=lambda w: setting("tables", w.table, "columns"),
+        paper=lambda w: setting("tables", w.table, "paper"),
         replicas=lambda w: replicas_of(TABLES[w.table]["rows"]),
         qr=setting("evaluation", "qr"),
         qr_grid=setting("evaluation", "qr_grid"),
