@@ -6,11 +6,18 @@ message that names the file or the key. The official importer's cases are in ``t
 
 from __future__ import annotations
 
+import hashlib
+import json
+import re
+import shutil
 import time
+from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
+from tohgs.assets.sources import ObjectSpec
 from tohgs.config import SEED_MAX, ConfigError, _finite_numbers, validate_config
 
 # ---------------------------------------------------------------------------------------------------------
@@ -72,3 +79,122 @@ def test_a_yaml_billion_laughs_is_refused_before_anything_iterates_over_it():
                                           r"than 200000 values"):
         validate_config(cfg)
     assert time.perf_counter() - t0 < 5.0
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Object files: every file a later stage reads from results/objects/<name>/ is checked against its checksum.
+
+
+@pytest.fixture(scope="module")
+def brick_folder(tmp_path_factory) -> Path:
+    """The objects stage's folder of the cube brick (fast decomposition settings)."""
+    from tests.test_objects import _prepare
+
+    out = tmp_path_factory.mktemp("objects")
+    meta = _prepare(ObjectSpec("brick-cube", "bricks", "stacking", None, "cube"), out / "brick-cube", None)
+    assert meta["status"] == "ok"
+    return out / "brick-cube"
+
+
+def _copy_folder(src: Path, root: Path) -> Path:
+    shutil.copytree(src, root / src.name)
+    return root / src.name
+
+
+def _cut_lines(path: Path, keep: float) -> None:
+    """Cut a text file at a line boundary, keeping about ``keep`` of its faces (what a truncated copy leaves)."""
+    lines = path.read_text().splitlines(keepends=True)
+    faces = [i for i, line in enumerate(lines) if line.startswith("f ")]
+    path.write_text("".join(lines[:faces[int(len(faces) * keep)]]))
+
+
+def test_the_objects_stage_records_the_checksums_of_its_files(brick_folder):
+    files = json.loads((brick_folder / "meta.json").read_text())["files"]
+    assert sorted(files) == ["collision.obj", "mesh.obj", "object.urdf"]
+    for name, record in files.items():
+        assert record["sha256"] == hashlib.sha256((brick_folder / name).read_bytes()).hexdigest()
+        assert record["bytes"] == (brick_folder / name).stat().st_size
+    assert files["mesh.obj"]["faces"] == 12 and files["collision.obj"]["faces"] >= 12
+
+
+def test_a_collision_file_cut_at_a_line_boundary_is_an_error_naming_it(brick_folder, tmp_path):
+    from tohgs.assets.mesh import collision_mesh
+    from tohgs.metrics.quality import DisplacementSimulator
+
+    folder = _copy_folder(brick_folder, tmp_path)
+    _cut_lines(folder / "collision.obj", 0.5)
+    with pytest.raises(ValueError, match=rf"{re.escape(str(folder / 'collision.obj'))}: does not match the checksum"):
+        DisplacementSimulator(folder / "collision.obj", np.zeros(3))
+    with pytest.raises(ValueError, match=r"collision\.obj: does not match the checksum .* rerun the objects stage "
+                                         r"for 'brick-cube'"):
+        collision_mesh(folder.parent, "brick-cube")
+
+
+def test_a_mesh_cut_to_part_of_its_faces_is_an_error_naming_it(brick_folder, tmp_path):
+    from tohgs.assets.mesh import object_mesh
+
+    folder = _copy_folder(brick_folder, tmp_path)
+    assert len(object_mesh(folder.parent, "brick-cube").faces) == 12
+    for keep in (0.9, 0.6):
+        shutil.copyfile(brick_folder / "mesh.obj", folder / "mesh.obj")
+        _cut_lines(folder / "mesh.obj", keep)
+        with pytest.raises(ValueError, match=rf"{re.escape(str(folder / 'mesh.obj'))}: does not match the checksum"):
+            object_mesh(folder.parent, "brick-cube")
+
+
+def test_a_mesh_that_loads_with_fewer_faces_than_recorded_is_an_error(brick_folder, tmp_path):
+    """The second line of defence: a file whose checksum holds but which loads with fewer faces than the
+    stage recorded (here the record says 13 of the 12)."""
+    from tohgs.assets.mesh import object_mesh
+
+    folder = _copy_folder(brick_folder, tmp_path)
+    meta = json.loads((folder / "meta.json").read_text())
+    meta["files"]["mesh.obj"]["faces"] = 13
+    (folder / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match=r"mesh\.obj: loads with 12 faces, its objects stage recorded 13"):
+        object_mesh(folder.parent, "brick-cube")
+
+
+def test_a_damaged_urdf_or_a_folder_without_checksums_stops_the_simulator(brick_folder, tmp_path):
+    from tohgs.sim.world import World
+
+    folder = _copy_folder(brick_folder, tmp_path)
+    pose = np.r_[0.0, 0.0, 0.1, 0.0, 0.0, 0.0, 1.0]
+    world = World()
+    try:
+        world.add_object(folder / "object.urdf", pose)  # intact: loads
+        text = (folder / "object.urdf").read_text()
+        (folder / "object.urdf").write_text(text.replace('mass value="', 'mass value="1'))
+        with pytest.raises(ValueError, match=r"object\.urdf: does not match the checksum"):
+            world.add_object(folder / "object.urdf", pose)
+        (folder / "object.urdf").write_text(text)
+        _cut_lines(folder / "collision.obj", 0.5)
+        with pytest.raises(ValueError, match=r"collision\.obj: does not match the checksum"):
+            world.add_object(folder / "object.urdf", pose)
+        shutil.copyfile(brick_folder / "collision.obj", folder / "collision.obj")
+        meta = json.loads((folder / "meta.json").read_text())
+        del meta["files"]
+        (folder / "meta.json").write_text(json.dumps(meta))
+        with pytest.raises(ValueError, match=r"records no checksums of the folder's files \(a folder of an older tohgs\)"):
+            world.add_object(folder / "object.urdf", pose)
+    finally:
+        world.close()
+
+
+def test_a_file_is_hashed_once_per_process(brick_folder, tmp_path, monkeypatch):
+    from tohgs.assets import manifest
+
+    folder = _copy_folder(brick_folder, tmp_path)
+    calls = []
+    real = manifest.hashlib.sha256
+    monkeypatch.setattr(manifest.hashlib, "sha256", lambda *a: calls.append(1) or real(*a))
+    for _ in range(3):
+        manifest.check_object_file(folder / "mesh.obj")
+    assert len(calls) == 1
+    data = bytearray((folder / "mesh.obj").read_bytes())
+    i = next(k for k, b in enumerate(data) if chr(b).isdigit())
+    data[i] = ord("9") if data[i] != ord("9") else ord("8")  # same size, other bytes
+    (folder / "mesh.obj").write_bytes(bytes(data))
+    with pytest.raises(ValueError, match="does not match"):
+        manifest.check_object_file(folder / "mesh.obj")  # a changed file is hashed again
+    assert len(calls) == 2

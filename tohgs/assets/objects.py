@@ -8,7 +8,8 @@ Per object, :func:`prepare_object` writes ``results/objects/<name>/``:
 - ``object.urdf``: a single-link URDF with ``mesh.obj`` as visual, ``collision.obj`` as collision and the
   mass properties at the configured density.
 - ``meta.json``: the spec, status (``ok`` / ``rejected``), rejection reason, repairs, scale, extents,
-  volume, mass and inertia. A rejected object's folder holds only ``meta.json``.
+  volume, mass and inertia, and under ``files`` the SHA-256, size and face count of the three files above,
+  which every reader checks (:mod:`tohgs.assets.manifest`). A rejected object's folder holds only ``meta.json``.
 
 :func:`write_catalog` gathers every ``meta.json`` into ``catalog.csv`` and assigns the train/val/test split
 by object, per task set, deterministically for the seed.
@@ -28,12 +29,17 @@ import trimesh
 
 from tohgs.assets.bricks import make_brick
 from tohgs.assets.decomposition import DecompositionSettings, convex_decomposition
-from tohgs.assets.mesh import (OBJECT_MESH, MeshError, choose_scale, load_mesh, mass_properties, normalise,
-                               repair_and_validate)
+from tohgs.assets.manifest import record_object_files
+from tohgs.assets.mesh import (COLLISION_MESH, OBJECT_MESH, OBJECT_URDF, MeshError, choose_scale, load_mesh,
+                               mass_properties, normalise, repair_and_validate)
 from tohgs.assets.sources import TASK_SET_BRICKS, TASK_SET_OBJECTS, ObjectSpec, read_object_meta
 from tohgs.io import atomic_dir, atomic_path, write_json
 
 log = logging.getLogger(__name__)
+
+#: The files of an accepted object's folder that later stages read; ``meta.json`` records their checksums
+#: (:mod:`tohgs.assets.manifest`).
+OBJECT_FILES = (OBJECT_MESH, COLLISION_MESH, OBJECT_URDF)
 
 CATALOG_COLUMNS = [
     "name", "source", "task_set", "split", "status", "reason", "scale", "extent_x", "extent_y", "extent_z",
@@ -133,8 +139,8 @@ def prepare_object(spec: dict[str, Any] | ObjectSpec, out_dir: str | Path, size:
         parts, method = convex_decomposition(mesh, settings, cache_dir)
         mp = mass_properties(mesh, density)
         mesh.export(tmp / OBJECT_MESH)
-        _write_obj_parts(tmp / "collision.obj", parts)
-        (tmp / "object.urdf").write_text(_urdf(spec.name, mp.mass, mp.inertia))
+        _write_obj_parts(tmp / COLLISION_MESH, parts)
+        (tmp / OBJECT_URDF).write_text(_urdf(spec.name, mp.mass, mp.inertia))
         meta.update(
             scale=scale, extents=mesh.extents.tolist(), bounds=mesh.bounds.tolist(), volume=mp.volume,
             mass=mp.mass, density=density, inertia=mp.inertia.tolist(), watertight=bool(mesh.is_watertight),
@@ -142,7 +148,7 @@ def prepare_object(spec: dict[str, Any] | ObjectSpec, out_dir: str | Path, size:
             n_collision_parts=len(parts), decomposition=method,
             collision_volume=float(sum(p.volume for p in parts)),
         )
-        write_json(tmp / "meta.json", meta)
+        record_object_files(tmp, meta, OBJECT_FILES)  # meta.json with the files' checksums, last
     log.info("%s: %s, scale %.4g, extents %s m, %d collision parts (%s), %.2f s", spec.name, meta["status"],
              scale, np.round(meta["extents"], 4).tolist(), len(parts), method, time.perf_counter() - t0)
     return meta

@@ -75,8 +75,10 @@ from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
 from tohgs.assets.decomposition import DecompositionSettings, cap_hull_vertices, convex_decomposition
-from tohgs.assets.mesh import OBJECT_MESH, MeshError, load_mesh, mass_properties, repair_and_validate
-from tohgs.assets.objects import CATALOG_COLUMNS, _urdf, _write_obj_parts
+from tohgs.assets.manifest import record_object_files
+from tohgs.assets.mesh import (COLLISION_MESH, OBJECT_MESH, OBJECT_URDF, MeshError, load_mesh, mass_properties,
+                               repair_and_validate)
+from tohgs.assets.objects import CATALOG_COLUMNS, OBJECT_FILES, _urdf, _write_obj_parts
 from tohgs.assets.sources import TASK_SET_BRICKS, TASK_SET_OBJECTS, sanitise
 from tohgs.assets.supports import Box, Support, make_table
 from tohgs.data.predictions import read_predictions
@@ -468,15 +470,15 @@ def _import_object(reader: _Reader, official: str, brick: bool, out_dir: Path, d
             return meta
         mp = mass_properties(mesh, density)
         mesh.export(tmp / OBJECT_MESH)
-        _write_obj_parts(tmp / "collision.obj", parts)
-        (tmp / "object.urdf").write_text(_urdf(name, mp.mass, mp.inertia))
+        _write_obj_parts(tmp / COLLISION_MESH, parts)
+        (tmp / OBJECT_URDF).write_text(_urdf(name, mp.mass, mp.inertia))
         meta.update(
             official_offset=centre.tolist(), scale=1.0, extents=mesh.extents.tolist(), bounds=mesh.bounds.tolist(),
             volume=mp.volume, mass=mp.mass, density=density, inertia=mp.inertia.tolist(),
             watertight=bool(mesh.is_watertight), repairs=repairs, n_vertices=len(mesh.vertices),
             n_faces=len(mesh.faces), n_collision_parts=len(parts), decomposition=method,
             collision_volume=float(sum(p.volume for p in parts)))
-        write_json(tmp / "meta.json", meta)
+        record_object_files(tmp, meta, OBJECT_FILES)  # meta.json with the files' checksums, last
     return meta
 
 
