@@ -198,3 +198,61 @@ def test_a_file_is_hashed_once_per_process(brick_folder, tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="does not match"):
         manifest.check_object_file(folder / "mesh.obj")  # a changed file is hashed again
     assert len(calls) == 2
+
+
+# ---------------------------------------------------------------------------------------------------------
+# An oversized mesh is rejected before it is parsed; the rule's memory covers the limit.
+
+
+def test_an_oversized_mesh_is_rejected_with_a_reason_before_it_is_parsed(tmp_path, monkeypatch):
+    import trimesh
+
+    from tohgs.assets import mesh as mesh_module
+    from tohgs.assets.objects import prepare_object
+
+    big = tmp_path / "big.obj"
+    trimesh.creation.torus(0.05, 0.02, major_sections=40, minor_sections=25).export(big)  # 2000 faces
+    parsed = []
+    real = mesh_module.trimesh.load
+    monkeypatch.setattr(mesh_module.trimesh, "load", lambda *a, **k: parsed.append(a) or real(*a, **k))
+    spec = ObjectSpec("dir-big", "dir", "placing/shelving", str(big))
+    size = validate_config({})["objects"]["size"]
+    meta = prepare_object(spec, tmp_path / "objects" / "dir-big", size, 1.0, {}, 500.0, 0, None,
+                          limits={"max_faces": 1999, "max_file_mb": 100.0})
+    assert meta["status"] == "rejected" and not parsed
+    assert meta["reason"] == (f"{big}: 2000 faces, more than objects.limits.max_faces = 1999 (not parsed: repairing and "
+                              "decomposing it would need more memory than the rule asks for; decimate the mesh, or "
+                              "raise the limit with resources.rules.prepare_object.mem_mb)")
+    meta = prepare_object(spec, tmp_path / "objects" / "dir-big", size, 1.0, {}, 500.0, 0, None,
+                          limits={"max_faces": 2000, "max_file_mb": 0.01})
+    assert meta["status"] == "rejected" and not parsed
+    assert meta["reason"].startswith(f"{big}: a file of ") and "larger than objects.limits.max_file_mb = 0.01 MB" in meta["reason"]
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".stl", ".ply"])
+def test_faces_are_counted_without_parsing_the_file(tmp_path, suffix):
+    import trimesh
+
+    from tohgs.assets.mesh import count_faces
+
+    mesh = trimesh.creation.torus(0.05, 0.02, major_sections=12, minor_sections=10)  # 240 faces
+    mesh.export(tmp_path / f"t{suffix}")
+    assert count_faces(tmp_path / f"t{suffix}") == 240
+    if suffix == ".stl":
+        mesh.export(tmp_path / "ascii.stl", file_type="stl_ascii")
+        assert count_faces(tmp_path / "ascii.stl") == 240
+    if suffix == ".obj":  # a quad counts as the two triangles it becomes
+        (tmp_path / "quad.obj").write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n")
+        assert count_faces(tmp_path / "quad.obj") == 2
+
+
+def test_the_memory_of_the_objects_rule_covers_the_face_limit():
+    from tohgs.assets.objects import prepare_memory_mb
+
+    cfg = validate_config({})
+    assert prepare_memory_mb(cfg["objects"]["limits"]["max_faces"]) <= cfg["resources"]["rules"]["prepare_object"]["mem_mb"]
+    with pytest.raises(ConfigError, match=r"config key 'resources\.rules\.prepare_object\.mem_mb': 1000 MB is less than "
+                                          r"the 1625 MB a mesh of objects\.limits\.max_faces = 200000 faces may need"):
+        validate_config({"objects": {"limits": {"max_faces": 200_000}}})
+    validate_config({"objects": {"limits": {"max_faces": 200_000}},
+                     "resources": {"rules": {"prepare_object": {"mem_mb": 1625, "runtime": 30}}}})

@@ -193,6 +193,14 @@ def _semantic_checks(cfg: Mapping[str, Any], base_dir: Path) -> None:
             p = base_dir / p
         if not p.is_dir():
             raise ConfigError(f"config key 'objects.sources.dir.path': folder '{dir_path}' does not exist")
+    from tohgs.assets.objects import prepare_memory_mb
+
+    need = prepare_memory_mb(obj["limits"]["max_faces"])
+    asked = cfg["resources"]["rules"].get("prepare_object", {}).get("mem_mb", need)
+    if asked < need:
+        raise ConfigError(f"config key 'resources.rules.prepare_object.mem_mb': {asked} MB is less than the {need} MB a "
+                          f"mesh of objects.limits.max_faces = {obj['limits']['max_faces']} faces may need (measured "
+                          "220 MB + 5.4 MB per 1000 faces, plus 25 %); raise it or lower the limit")
     n_total = src["pybullet_data"]["random_urdfs"] + src["pybullet_data"]["named"] + src["bricks"]["count"]
     if n_total == 0 and dir_path is None:
         raise ConfigError("config key 'objects.sources': the selection is empty (no pybullet_data objects, "

@@ -30,8 +30,8 @@ import trimesh
 from tohgs.assets.bricks import make_brick
 from tohgs.assets.decomposition import DecompositionSettings, convex_decomposition
 from tohgs.assets.manifest import record_object_files
-from tohgs.assets.mesh import (COLLISION_MESH, OBJECT_MESH, OBJECT_URDF, MeshError, choose_scale, load_mesh,
-                               mass_properties, normalise, repair_and_validate)
+from tohgs.assets.mesh import (COLLISION_MESH, OBJECT_MESH, OBJECT_URDF, MeshError, MeshLimits, choose_scale,
+                               load_mesh, mass_properties, normalise, repair_and_validate)
 from tohgs.assets.sources import TASK_SET_BRICKS, TASK_SET_OBJECTS, ObjectSpec, read_object_meta
 from tohgs.io import atomic_dir, atomic_path, write_json
 
@@ -79,8 +79,24 @@ def _urdf(name: str, mass: float, inertia: np.ndarray) -> str:
 """
 
 
-def build_object_mesh(spec: ObjectSpec, size: dict[str, float], brick_scale: float, seed: int
-                      ) -> tuple[trimesh.Trimesh, float, list[str]]:
+#: Peak memory of one ``prepare_object`` job (``/usr/bin/time -v``, default settings, CoACD on the whole
+#: mesh) on watertight tori of 20k, 100k and 200k faces: 325, 768 and 1302 MB, a line of 220 MB plus 5.4 MB
+#: per 1000 faces (the repair's adjacency caches and CoACD's input grow with the faces).
+PREPARE_BASE_MB = 220.0
+PREPARE_MB_PER_1000_FACES = 5.4
+#: Headroom over the measured line for other shapes and settings.
+PREPARE_MEMORY_MARGIN = 1.25
+
+
+def prepare_memory_mb(max_faces: int) -> int:
+    """The memory, MB, a ``prepare_object`` job may need for a mesh of ``max_faces`` faces (the measured line
+    times :data:`PREPARE_MEMORY_MARGIN`): what ``resources.rules.prepare_object.mem_mb`` must cover for the
+    limit ``objects.limits.max_faces`` (100,000 faces: 950 MB, within the default 1000)."""
+    return int(np.ceil(PREPARE_MEMORY_MARGIN * (PREPARE_BASE_MB + PREPARE_MB_PER_1000_FACES * max_faces / 1000)))
+
+
+def build_object_mesh(spec: ObjectSpec, size: dict[str, float], brick_scale: float, seed: int,
+                      limits: MeshLimits | None = None) -> tuple[trimesh.Trimesh, float, list[str]]:
     """Load (or generate), repair, validate and normalise one object.
 
     Args:
@@ -88,6 +104,7 @@ def build_object_mesh(spec: ObjectSpec, size: dict[str, float], brick_scale: flo
         size: ``objects.size`` (longest_min/max, thickness_min/max, metres) for non-brick objects.
         brick_scale: uniform scale applied to the designed bricks.
         seed: global seed (the scale draw uses :func:`object_rng`).
+        limits: the largest source file and face count, checked before the file is parsed (None: none).
 
     Returns:
         ``(mesh, scale, repairs)``: normalised mesh in metres, the scale applied to the source, repairs.
@@ -98,7 +115,7 @@ def build_object_mesh(spec: ObjectSpec, size: dict[str, float], brick_scale: flo
     if spec.source == "bricks":
         raw = make_brick(spec.brick)
     else:
-        raw = load_mesh(spec.path)
+        raw = load_mesh(spec.path, limits)
     mesh, repairs = repair_and_validate(raw)
     if spec.source == "bricks":
         scale = float(brick_scale)
@@ -113,22 +130,25 @@ def build_object_mesh(spec: ObjectSpec, size: dict[str, float], brick_scale: flo
 
 def prepare_object(spec: dict[str, Any] | ObjectSpec, out_dir: str | Path, size: dict[str, float],
                    brick_scale: float, decomposition: dict[str, Any], density: float, seed: int,
-                   cache_dir: str | Path | None) -> dict[str, Any]:
+                   cache_dir: str | Path | None, limits: dict[str, Any] | MeshLimits | None = None) -> dict[str, Any]:
     """Run the objects stage for one object and write its folder atomically.
 
     A bad mesh does not raise (whatever trimesh or the repair raise on it): the folder then holds a
-    ``meta.json`` with ``status: rejected`` and the reason, so the rest of the run proceeds.
+    ``meta.json`` with ``status: rejected`` and the reason, so the rest of the run proceeds. So does a
+    source file beyond ``limits`` (``objects.limits``; None: the defaults of :class:`MeshLimits`), refused
+    before it is parsed.
 
     Returns:
         The metadata written to ``meta.json``.
     """
     spec = spec if isinstance(spec, ObjectSpec) else ObjectSpec(**spec)
+    limits = limits if isinstance(limits, MeshLimits) else MeshLimits(**(limits or {}))
     t0 = time.perf_counter()
     meta: dict[str, Any] = {**spec.to_dict(), "status": "ok", "reason": ""}
     out_dir = Path(out_dir)
     with atomic_dir(out_dir) as tmp:
         try:
-            mesh, scale, repairs = build_object_mesh(spec, size, brick_scale, seed)
+            mesh, scale, repairs = build_object_mesh(spec, size, brick_scale, seed, limits)
         except Exception as exc:  # noqa: BLE001 - any failure on a bad file is a rejection, never a crash
             reason = str(exc) if isinstance(exc, MeshError) else f"invalid mesh ({type(exc).__name__}: {exc})"
             meta.update(status="rejected", reason=reason)

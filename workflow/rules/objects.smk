@@ -13,6 +13,7 @@ rule prepare_object:
         size=object_size,
         density=setting("objects", "density"),
         decomposition=setting("objects", "decomposition"),
+        limits=setting("objects", "limits"),
         cache_dir=setting("cache_dir"),
     resources:
         **rule_resources("prepare_object"),
