@@ -8,8 +8,11 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import re
 import shutil
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -17,6 +20,7 @@ import numpy as np
 import pytest
 import yaml
 
+from tests.workflow_tools import copy_workflow, workflow_env
 from tohgs.assets.sources import ObjectSpec
 from tohgs.config import SEED_MAX, ConfigError, _finite_numbers, validate_config
 
@@ -256,3 +260,78 @@ def test_the_memory_of_the_objects_rule_covers_the_face_limit():
         validate_config({"objects": {"limits": {"max_faces": 200_000}}})
     validate_config({"objects": {"limits": {"max_faces": 200_000}},
                      "resources": {"rules": {"prepare_object": {"mem_mb": 1625, "runtime": 30}}}})
+
+
+# ---------------------------------------------------------------------------------------------------------
+# A user folder: unsafe file names and entries that are no files are skipped with their reason.
+
+
+def _user_folder(folder: Path) -> Path:
+    import trimesh
+
+    folder.mkdir()
+    box = trimesh.creation.box(extents=(0.05, 0.06, 0.07))
+    for name in ("cup{1}.obj", "new\nline.obj", "plain.obj"):
+        box.export(folder / name)
+    with open(os.fsencode(folder) + b"/bad\xff.obj", "wb") as fh:
+        fh.write((folder / "plain.obj").read_bytes())
+    os.symlink(folder / "gone.obj", folder / "dangling.obj")
+    os.mkfifo(folder / "fifo.stl")
+    (folder / "folder.ply").mkdir()
+    (folder / "readme.txt").write_text("not a mesh: ignored without a word")
+    return folder
+
+
+def test_unsafe_names_and_entries_that_are_no_files_are_skipped_with_their_reason(tmp_path):
+    from tohgs.assets.sources import dir_candidates
+
+    folder = _user_folder(tmp_path / "mine")
+    skipped: list[tuple[str, str]] = []
+    specs = dir_candidates(folder, skipped)
+    assert [s.name for s in specs] == ["dir-plain"]
+    reasons = {Path(f.strip("'")).name: why for f, why in skipped}
+    assert reasons == {
+        "bad\\udcff.obj": "the name is not valid UTF-8",
+        "cup{1}.obj": "the name holds '{' or '}', which Snakemake reads as a wildcard in an input path; rename the file",
+        "dangling.obj": f"a dangling symbolic link (to {str(folder / 'gone.obj')!r})",
+        "fifo.stl": "a FIFO, not a mesh file",
+        "folder.ply": "a folder, not a mesh file",
+        "new\\nline.obj": "the name holds control characters"}
+    os.symlink(folder / "cup{1}.obj", folder / "link.obj")  # a safe name whose target is not
+    skipped.clear()
+    assert [s.name for s in dir_candidates(folder, skipped)] == ["dir-plain"]
+    assert any(f.endswith("link.obj") and "it resolves to" in why and "'{' or '}'" in why for f, why in skipped)
+    with pytest.raises(ValueError, match=r"objects\.sources\.dir\.path: folder .*brace\{s\}.* cannot hold workflow "
+                                         r"inputs: the name holds '\{' or '\}'"):
+        (tmp_path / "brace{s}").mkdir()
+        dir_candidates(tmp_path / "brace{s}")
+
+
+def test_skipped_files_are_listed_in_the_catalog(brick_folder, tmp_path):
+    from tohgs.assets.objects import read_catalog, write_catalog
+
+    split = {"objects": {"test": 0.0, "val": 0.0}, "bricks": {"test": 0.0, "val": 0.0}}
+    cat = write_catalog([brick_folder], split, 0, tmp_path / "catalog.csv",
+                        skipped=[("mine/fifo.stl", "a FIFO, not a mesh file")])
+    assert sorted(cat.status) == ["ok", "skipped"]
+    back = read_catalog(tmp_path / "catalog.csv", status=None)
+    row = back[back.status == "skipped"].iloc[0]
+    assert row["name"] == "" and row.source_path == "mine/fifo.stl" and row.reason == "a FIFO, not a mesh file"
+    assert read_catalog(tmp_path / "catalog.csv").name.tolist() == ["brick-cube"]
+
+
+def test_a_file_named_with_braces_no_longer_stops_the_workflow(tmp_path):
+    """``cup{1}.obj`` once stopped every command at parse time with a WildcardError naming neither the file nor
+    the folder; now it is skipped with a line that names it, and the rest of the folder runs."""
+    workdir = copy_workflow(tmp_path / "wf")
+    _user_folder(workdir / "mine")
+    (workdir / "dir.yaml").write_text(yaml.safe_dump({"objects": {"sources": {"dir": {"path": "mine"}}}}))
+    out = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--cores", "1", "--configfile",
+                          ".test/config/config.yaml", "dir.yaml", "--until", "catalog"], cwd=workdir,
+                         env=workflow_env(workdir), capture_output=True, text=True, timeout=600)
+    text = out.stdout + out.stderr
+    assert out.returncode == 0, text[-3000:]
+    assert "WildcardError" not in text and "results/objects/dir-plain" in text
+    assert ("objects.sources.dir: skipped 'mine/cup{1}.obj': the name holds '{' or '}', which Snakemake reads as "
+            "a wildcard in an input path; rename the file") in text
+    assert "objects.sources.dir: skipped mine/fifo.stl: a FIFO, not a mesh file" in text

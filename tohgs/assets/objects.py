@@ -231,7 +231,8 @@ def assign_splits(names: list[str], test_fraction: float, val_fraction: float, r
 
 
 def write_catalog(object_dirs: list[str | Path], split_cfg: dict[str, dict[str, float]], seed: int,
-                  out_csv: str | Path, task_sets: list[str] | None = None) -> pd.DataFrame:
+                  out_csv: str | Path, task_sets: list[str] | None = None,
+                  skipped: list[tuple[str, str]] | None = None) -> pd.DataFrame:
     """Gather the objects' ``meta.json`` into ``catalog.csv`` with the split by object.
 
     Args:
@@ -241,9 +242,12 @@ def write_catalog(object_dirs: list[str | Path], split_cfg: dict[str, dict[str, 
         out_csv: the catalog path.
         task_sets: the task sets the run's tasks use; each must keep a training and a test object after
             the rejections (None: no check).
+        skipped: ``(file, reason)`` of the user folder's entries that never became objects
+            (:func:`tohgs.assets.sources.dir_candidates`): rows of status ``skipped``, no name, the file in
+            ``source_path``.
 
     Returns:
-        The catalog (one row per selected object; rejected objects have split ``""``).
+        The catalog (one row per selected object and skipped file; rejected objects have split ``""``).
 
     Raises:
         ValueError: a task set without training or test objects (the message lists the rejections).
@@ -260,10 +264,14 @@ def write_catalog(object_dirs: list[str | Path], split_cfg: dict[str, dict[str, 
             "repairs": "; ".join(m.get("repairs", [])), "n_collision_parts": m.get("n_collision_parts", 0),
             "decomposition": m.get("decomposition", ""), "source_path": m.get("path") or "",
         })
+    for file, reason in skipped or []:
+        rows.append({"name": "", "source": "dir", "task_set": TASK_SET_OBJECTS, "split": "", "status": "skipped",
+                     "reason": reason, "n_collision_parts": 0, "watertight": False, "source_path": file})
     df = pd.DataFrame(rows, columns=CATALOG_COLUMNS)
     if task_sets:
         ok = df[df.status == "ok"]
-        rejected = "; ".join(f"{r['name']} rejected: {r['reason']}" for _, r in df[df.status != "ok"].iterrows())
+        rejected = "; ".join(f"{r['name'] or r['source_path']} {r['status']}: {r['reason']}"
+                             for _, r in df[df.status != "ok"].iterrows())
         check_split_sizes(ok.task_set.value_counts().to_dict(), split_cfg, task_sets, "accepted",
                           rejected or "no object was rejected")
     for k, (task_set, key) in enumerate([(TASK_SET_OBJECTS, "objects"), (TASK_SET_BRICKS, "bricks")]):
@@ -274,9 +282,11 @@ def write_catalog(object_dirs: list[str | Path], split_cfg: dict[str, dict[str, 
     with atomic_path(out_csv) as tmp:
         df.to_csv(tmp, index=False)
     n_ok = int((df.status == "ok").sum())
-    log.info("catalog: %d objects, %d accepted, %d rejected", len(df), n_ok, len(df) - n_ok)
+    n_skipped = int((df.status == "skipped").sum())
+    log.info("catalog: %d objects, %d accepted, %d rejected, %d files skipped", len(df) - n_skipped, n_ok,
+             len(df) - n_ok - n_skipped, n_skipped)
     for _, r in df[df.status != "ok"].iterrows():
-        log.info("rejected %s: %s", r["name"], r["reason"])
+        log.info("%s %s: %s", r["status"], r["name"] or r["source_path"], r["reason"])
     return df
 
 
@@ -292,4 +302,5 @@ def read_catalog(path: str | Path, status: str | None = "ok") -> pd.DataFrame:
         raise ValueError(f"{path}: not a tohgs catalog, missing columns {sorted(missing)}")
     df["split"] = df["split"].fillna("")
     df["reason"] = df["reason"].fillna("")
+    df["name"] = df["name"].fillna("")  # a skipped file's row has none
     return df if status is None else df[df.status == status].reset_index(drop=True)

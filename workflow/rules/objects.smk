@@ -38,6 +38,7 @@ checkpoint catalog:
         split=setting("objects", "split"),
         seed=setting("seed"),
         task_sets=TASK_SETS,
+        skipped=[list(s) for s in SKIPPED_FILES],  # user-folder files that are no objects, with the reason
     priority: PRIORITY["data"]
     conda:
         "../envs/tohgs.yaml"
