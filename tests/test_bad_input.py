@@ -335,3 +335,65 @@ def test_a_file_named_with_braces_no_longer_stops_the_workflow(tmp_path):
     assert ("objects.sources.dir: skipped 'mine/cup{1}.obj': the name holds '{' or '}', which Snakemake reads as "
             "a wildcard in an input path; rename the file") in text
     assert "objects.sources.dir: skipped mine/fifo.stl: a FIFO, not a mesh file" in text
+
+
+# ---------------------------------------------------------------------------------------------------------
+# A checkpoint of another task or component; store attributes outside the manifest.
+
+
+def _checkpoints(folder: Path, task: str) -> dict[str, Path]:
+    """Untrained checkpoints of the tiny ContactDiffuser and GraspDiffuser of tests/test_train.py for ``task``."""
+    from tests.test_train import TINY
+    from tohgs.models.checkpoint import save_checkpoint
+    from tohgs.models.component import build_component
+
+    folder.mkdir(exist_ok=True)
+    paths = {}
+    for name in ("contact_diffuser", "grasp_diffuser"):
+        paths[name] = folder / f"{name}.pt"
+        save_checkpoint(paths[name], build_component(name, TINY[name]), name, task, TINY[name], {}, loss_curve=[])
+    return paths
+
+
+def test_a_checkpoint_of_another_task_or_component_is_refused(tmp_path):
+    from tests.test_train import OURS
+    from tohgs.methods.predict import predict
+    from tohgs.models.checkpoint import load_component
+
+    shelving = _checkpoints(tmp_path / "shelving", "shelving")
+    settings = {"samples": 1, "device": "cpu"}
+    with pytest.raises(ValueError, match=rf"{re.escape(str(shelving['contact_diffuser']))}: a checkpoint of task "
+                                         r"'shelving', but this job needs task 'placing' \(a file copied into place\?"):
+        predict("placing", "ours", OURS, [], shelving, settings, tmp_path / "p.zarr")
+    placing = _checkpoints(tmp_path / "placing", "placing")
+    shutil.copyfile(placing["grasp_diffuser"], placing["contact_diffuser"])  # the other component copied into place
+    with pytest.raises(ValueError, match=r"contact_diffuser\.pt: a checkpoint of component 'grasp_diffuser', but this "
+                                         r"job needs component 'contact_diffuser'"):
+        predict("placing", "ours", OURS, [], placing, settings, tmp_path / "p.zarr")
+    assert not (tmp_path / "p.zarr").exists()
+    _, ckpt = load_component(shelving["grasp_diffuser"], task="shelving", component="grasp_diffuser")  # its own: fine
+    assert ckpt["task"] == "shelving"
+
+
+def test_store_root_attributes_are_in_the_manifest(tmp_path):
+    from tohgs.data.store import MANIFEST, read_store, write_store
+
+    path = tmp_path / "s.zarr"
+    write_store(path, {"x": (np.arange(6.0).reshape(3, 2), ("row", "xy"))},
+                {"objects": ["brick-a", "brick-b"], "alpha_contact": 100.0, "nested": {"k": [1, 2]}}, "test", 1)
+    arrays, attrs = read_store(path, "test", 1, None, "test store")
+    assert attrs["objects"] == ["brick-a", "brick-b"] and attrs["alpha_contact"] == 100.0
+    meta_path = path / "zarr.json"
+    original = json.loads(meta_path.read_text())
+    for edit in ({"objects": ["brick-b", "brick-a"]}, {"alpha_contact": 50.0}, {"nested": {"k": [1, 3]}}):
+        meta = json.loads(json.dumps(original))
+        meta["attributes"].update(edit)
+        meta_path.write_text(json.dumps(meta))
+        with pytest.raises(ValueError, match=rf"{re.escape(str(path))}: its root attributes \(zarr\.json\) do not match "
+                                             r"their manifest checksum"):
+            read_store(path, "test", 1, None, "test store")
+    meta = json.loads(json.dumps(original))
+    meta["attributes"][MANIFEST] = meta["attributes"][MANIFEST]["arrays"]  # an older tohgs's manifest
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match=r"its manifest does not cover the root attributes \(a store of an older tohgs\)"):
+        read_store(path, "test", 1, None, "test store")
