@@ -78,6 +78,14 @@ def test_the_workflow_reads_the_splits_and_the_hand(imported):
         read_import(copy)
     with pytest.raises(FileNotFoundError, match="python -m tohgs.data.official import"):
         read_import(copy / "nothing")
+    older = imported["out"].parent / "older-import"  # objects without the checksums of their files
+    shutil.copytree(imported["out"], older)
+    meta = json.loads((older / "objects/off-can-b/meta.json").read_text())
+    del meta["files"]
+    (older / "objects/off-can-b/meta.json").write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match=r"off-can-b/meta\.json: no checksums of the object's files \(an import by an "
+                                         r"older tohgs\): import again"):
+        read_import(older)
 
 
 def test_bad_files_are_counted_and_named(imported):

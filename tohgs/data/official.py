@@ -1011,7 +1011,8 @@ def read_import(root: str | Path) -> ImportedDataset:
 
     Raises:
         FileNotFoundError: the folder has no report or catalog (naming the command that writes them).
-        ValueError: a report without the hand or the splits (written by an older tohgs: import again).
+        ValueError: a report without the hand or the splits, or an accepted object whose ``meta.json`` records no
+            checksums of its files (written by an older tohgs: import again).
     """
     import pandas as pd
 
@@ -1024,7 +1025,16 @@ def read_import(root: str | Path) -> ImportedDataset:
     report = json.loads(report_path.read_text())
     if not report.get("hand") or not isinstance(report.get("splits"), dict):
         raise ValueError(f"{report_path}: no 'hand' or 'splits' (an import by an older tohgs): import again")
-    catalog = pd.read_csv(catalog_path, usecols=["name"])
+    catalog = pd.read_csv(catalog_path, usecols=["name", "status"])
+    for name in catalog.name[catalog.status == "ok"]:
+        meta_path = root / "objects" / name / "meta.json"
+        try:
+            files = json.loads(meta_path.read_text()).get("files")
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"{meta_path}: unreadable ({exc}): import again") from exc
+        if not isinstance(files, dict):
+            raise ValueError(f"{meta_path}: no checksums of the object's files (an import by an older tohgs): "
+                             "import again")
     return ImportedDataset(root, tuple(sorted(catalog.name)), report["hand"], report["splits"],
                            int(report.get("n_problems", 0)))
 
