@@ -30,6 +30,7 @@ _METAS: dict[tuple[str, int, int, int, int], dict[str, Any]] = {}
 
 
 def _stat_key(path: Path) -> tuple[str, int, int, int, int]:
+    """What identifies one version of a file: its real path, device, inode, size and modification time."""
     st = path.stat()
     return (os.path.realpath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
 
@@ -78,6 +79,7 @@ def record_object_files(folder: str | Path, meta: dict[str, Any], names: list[st
 
 
 def _read_meta(meta_path: Path) -> dict[str, Any]:
+    """A folder's ``meta.json``, parsed once per version (``ValueError`` naming an unreadable one)."""
     key = _stat_key(meta_path)
     if key not in _METAS:
         try:

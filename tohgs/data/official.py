@@ -826,11 +826,13 @@ def _row_names(r: _Row, task: str) -> list[tuple[str, str]]:
 
 
 def _tohgs_name(key: tuple[str, str]) -> str:
+    """tohgs's name of an official ``(kind, name)``: an object's, a brick's or a shelf's (support) name."""
     kind, official = key
     return shelf_name(official) if kind == "shelf" else object_name(official, kind == "brick")
 
 
 def _official_path(key: tuple[str, str]) -> str:
+    """The official mesh of ``(kind, name)``, relative to the tree's root."""
     kind, official = key
     return shelf_path(official) if kind == "shelf" else mesh_path(official, kind == "brick")
 
