@@ -140,6 +140,7 @@ def test_the_settings_dataclasses_default_to_the_schema():
     from tohgs.metrics.bootstrap import BootstrapSettings
     from tohgs.models.pose_prior import PosePriorConfig
     from tohgs.models.train import TrainSettings
+    from tohgs.assets.mesh import MeshLimits
 
     cfg = validate_config({})
     schema = load_schema()
@@ -156,7 +157,7 @@ def test_the_settings_dataclasses_default_to_the_schema():
              (GraspCVAEConfig, networks["grasp_cvae"]), (ContactNetConfig, networks["contact_net"]),
              (ContactGenConfig, networks["contact_gen"]), (SolverSettings, pred["contactgen"]),
              (FlexSettings, pred["flex"]), (PosePriorConfig, networks["pose_prior"]),
-             (BootstrapSettings, cfg["evaluation"]["bootstrap"])]
+             (BootstrapSettings, cfg["evaluation"]["bootstrap"]), (MeshLimits, cfg["objects"]["limits"])]
     for cls, block in pairs:
         for f in dataclasses.fields(cls):
             value = getattr(cls(), f.name)

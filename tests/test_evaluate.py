@@ -8,6 +8,7 @@ import pytest
 import trimesh
 
 from tests.test_maps import built  # noqa: F401  (the module-scoped tiny dataset)
+from tohgs.assets.manifest import record_object_files
 from tohgs.geometry.scene import SceneCollider
 from tohgs.metrics.evaluate import COLUMNS, _ObjectAssets, diversity, grasp_metrics, occupied_fraction
 from tohgs.metrics.quality import DisplacementSimulator, SDSettings, surface_voxels
@@ -162,6 +163,7 @@ def test_reference_grasps_evaluate_collision_free_at_both_poses(built, tmp_path)
                                                                            sh.goal_transform[c], wrist), atol=1e-6)
     mesh = trimesh.load(tmp / "objects/brick-cube/mesh.obj", force="mesh")
     mesh.export(tmp / "objects/brick-cube/collision.obj")  # the cube is convex: its own decomposition
+    record_object_files(tmp / "objects/brick-cube", {"name": "brick-cube"}, ["mesh.obj", "collision.obj"])
     rows = evaluate_predictions(tmp_path / "dataset.zarr", [tmp / "scenes/brick-cube.zarr"], tmp / "objects",
                                 tmp / "objects/supports/supports.json", hand.assets, {"gravity_direction": "fixed"})
     assert len(rows) == sh.n_configs * 4 and list(rows.columns) == list(COLUMNS)
@@ -256,6 +258,7 @@ def test_pv_voxelises_the_convex_parts_inner_faces_included_or_the_mesh(tmp_path
         lines += [f"f {a + offset} {b + offset} {c + offset}" for a, b, c in p.faces]
         offset += len(p.vertices)
     (obj / "collision.obj").write_text("\n".join(lines) + "\n")
+    record_object_files(obj, {"name": "cube"}, ["mesh.obj", "collision.obj"])
     assert len(collision_mesh(tmp_path / "objects", "cube").faces) == 24
     parts = _object_assets(tmp_path / "objects", "cube", 0.001, {}, pv_mesh="collision").voxels
     whole = _object_assets(tmp_path / "objects", "cube", 0.001, {}, pv_mesh="mesh").voxels

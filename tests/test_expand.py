@@ -8,6 +8,7 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from tohgs.assets.bricks import make_brick
+from tohgs.assets.manifest import record_object_files
 from tohgs.assets.supports import make_table
 from tohgs.data.scenes import SceneSet
 from tohgs.geometry.grasp import pose_matrix, transform_grasp
@@ -54,6 +55,7 @@ def test_expansion_keeps_a_clear_grasp_and_drops_one_in_an_obstacle_or_the_table
     cube.apply_translation(-cube.center_mass)
     (tmp_path / "brick-cube").mkdir()
     cube.export(tmp_path / "brick-cube" / "mesh.obj")
+    record_object_files(tmp_path / "brick-cube", {"name": "brick-cube"}, ["mesh.obj"])
     supports = {"table": make_table()}
     # A hand above the cube (object frame): its lowest vertex 1 cm above the cube's top; another the
     # same but 8 cm lower (through the table once the cube rests on it).

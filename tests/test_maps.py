@@ -11,6 +11,7 @@ import torch
 import trimesh
 
 from tohgs.assets.bricks import make_brick
+from tohgs.assets.manifest import record_object_files
 from tohgs.assets.supports import write_supports
 from tohgs.data.build_maps import make_map_shard, shard_items
 from tohgs.data.maps import SCHEMA_VERSION, MapDataset, read_map_shard
@@ -96,6 +97,7 @@ def built(tmp_path_factory):
     cube.apply_translation(-cube.center_mass)
     (tmp / "objects" / "brick-cube").mkdir(parents=True)
     cube.export(tmp / "objects" / "brick-cube" / "mesh.obj")
+    record_object_files(tmp / "objects" / "brick-cube", {"name": "brick-cube"}, ["mesh.obj"])
     write_supports([1.5, 1.0, 0.05], [], tmp / "objects" / "supports")
     sc = _scene(None)
     two = type(sc)(**{**sc.__dict__})
@@ -263,6 +265,7 @@ def test_obstacle_gaps_are_the_distance_from_the_target_to_its_nearest_obstacle(
     cube = trimesh.creation.box(extents=(0.04, 0.04, 0.04))
     (tmp_path / "box").mkdir()
     cube.export(tmp_path / "box" / "mesh.obj")
+    record_object_files(tmp_path / "box", {"name": "box"}, ["mesh.obj"])
     pts, _ = sample_surface(cube, 2000, np.random.default_rng(0))
     here, there = [0, 0, 0, 0, 0, 0, 1.0], [0.05, 0, 0, 0, 0, 0, 1.0]
     scenes = _Obstacles([here, here], [there, there], [[0.1, 0, 0, 0, 0, 0, 1.0], None])

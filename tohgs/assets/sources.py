@@ -14,7 +14,10 @@ the workflow; validation happens per object later and rejections are recorded in
 from __future__ import annotations
 
 import json
+import os
 import re
+import stat
+import unicodedata
 import zlib
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -109,30 +112,64 @@ def brick_candidates() -> list[ObjectSpec]:
     return [ObjectSpec(f"brick-{b}", "bricks", TASK_SET_BRICKS, None, b) for b in brick_names()]
 
 
+def unsafe_path(path: str) -> str | None:
+    """Why ``path`` cannot be a workflow input, or None: not valid UTF-8 (bytes Python keeps as surrogates),
+    control characters (a newline splits log lines and tables), or braces (Snakemake reads ``{...}`` in an
+    input path as a wildcard, and no escaping gets past its check: ``cup{1}.obj`` stopped every command)."""
+    try:
+        path.encode("utf-8")
+    except UnicodeEncodeError:
+        return "the name is not valid UTF-8"
+    if any(unicodedata.category(c) == "Cc" for c in path):
+        return "the name holds control characters"
+    if "{" in path or "}" in path:
+        return "the name holds '{' or '}', which Snakemake reads as a wildcard in an input path; rename the file"
+    return None
+
+
+def _not_a_file(f: Path) -> str | None:
+    """Why the folder entry ``f`` (a mesh suffix) is no file to read, or None."""
+    if f.is_symlink() and not f.exists():
+        return f"a dangling symbolic link (to {os.readlink(f)!r})"
+    if f.is_file():
+        return None
+    mode = f.stat().st_mode
+    kind = ("a folder" if stat.S_ISDIR(mode) else "a FIFO" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode)
+            else "a device" if stat.S_ISBLK(mode) or stat.S_ISCHR(mode) else "not a regular file")
+    return f"{kind}, not a mesh file"
+
+
 def dir_candidates(folder: str | Path, skipped: list[tuple[str, str]] | None = None) -> list[ObjectSpec]:
     """Every mesh file (.obj/.stl/.ply) directly in ``folder``, sorted; a name taken by an earlier file gets
     the suffix (``cup.obj``, ``cup.stl``: ``dir-cup``, ``dir-cup-stl``).
 
     A stem with no letter or digit of the name alphabet (``日本.obj``) is named by its CRC-32
-    (``dir-u3f2a9c01``: stable, and the catalog's ``source_path`` says which file it is). A path that
-    cannot be written as UTF-8 is skipped, with ``(path, reason)`` appended to ``skipped``.
+    (``dir-u3f2a9c01``: stable, and the catalog's ``source_path`` says which file it is). An entry with a
+    mesh suffix that is no regular file (a dangling link, a FIFO, a folder) or whose path is not safe as a
+    workflow input (:func:`unsafe_path`: not UTF-8, control characters, braces) is skipped, with
+    ``(path, reason)`` appended to ``skipped`` (the workflow logs them and lists them in the catalog).
 
     Raises:
         FileNotFoundError: the folder does not exist.
-        ValueError: two files that would become the same object name (the message names both files).
+        ValueError: the folder's own path is unsafe, or two files would become the same object name (the
+            message names both files).
     """
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(f"objects.sources.dir.path: folder '{folder}' does not exist")
-    files = sorted(f for f in folder.iterdir() if f.is_file() and f.suffix.lower() in MESH_SUFFIXES)
+    why = unsafe_path(str(folder.resolve()))
+    if why:
+        raise ValueError(f"objects.sources.dir.path: folder {str(folder)!r} cannot hold workflow inputs: {why}")
+    entries = sorted(f for f in folder.iterdir() if f.suffix.lower() in MESH_SUFFIXES)
     out: list[ObjectSpec] = []
     owner: dict[str, Path] = {}
-    for f in files:
-        try:
-            str(f.resolve()).encode("utf-8")
-        except UnicodeEncodeError:
+    for f in entries:
+        why = _not_a_file(f) or unsafe_path(f.name)
+        if not why and unsafe_path(str(f.resolve())):
+            why = f"it resolves to {ascii(str(f.resolve()))}: {unsafe_path(str(f.resolve()))}"
+        if why:
             if skipped is not None:
-                skipped.append((repr(str(f)), "the file name is not valid UTF-8"))
+                skipped.append((ascii(str(f)) if unsafe_path(str(f)) else str(f), why))
             continue
         try:
             name = f"dir-{sanitise(f.stem)}"

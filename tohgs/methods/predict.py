@@ -73,7 +73,7 @@ def predict(task: str, name: str, method: dict[str, Any], test_shards: list[str 
     device = pick_device(s.device)
     models, meta = {}, {}
     for comp, path in checkpoints.items():
-        models[comp], ckpt = load_component(path, device)
+        models[comp], ckpt = load_component(path, device, task=task, component=comp)
         curve = ckpt.get("loss_curve") or []
         meta[comp] = {"kind": ckpt["kind"], "final_loss": curve[-1]["loss"] if curve else None}
     hand_model = None

@@ -139,7 +139,8 @@ class DisplacementSimulator:
 
     Args:
         collision_obj: the object's convex decomposition (``collision.obj`` of the objects stage), in the
-            object's mesh frame.
+            object's mesh frame; in an objects folder (a ``meta.json`` beside it) it is checked against the
+            checksum the stage recorded (``ValueError`` naming a damaged file).
         vertex_mean: (3,) the object's mesh vertex mean in that frame, m: its inertial frame for SD.
         settings: the protocol.
     """
@@ -149,8 +150,11 @@ class DisplacementSimulator:
     settings: SDSettings = field(default_factory=SDSettings)
 
     def __post_init__(self) -> None:
+        from tohgs.assets.manifest import META_JSON, check_object_file
         from tohgs.sim.client import DirectClient
 
+        if (Path(self.collision_obj).parent / META_JSON).is_file():  # an objects folder: check its checksum
+            check_object_file(self.collision_obj)
         self._client = DirectClient()
 
     def close(self) -> None:
