@@ -443,6 +443,31 @@ def claims_metrics(wildcards):
             for r in REPLICAS[m]]
 
 
+def viewer_methods():
+    """The methods the viewer's static export draws: every table's rows (they are evaluated), in first-use order."""
+    return list(dict.fromkeys(m for t in TABLES.values() for m in t["rows"]))
+
+
+def viewer_labels(wildcards):
+    """The labels of the viewer's methods (their order is the export's)."""
+    return {m: METHODS[m]["label"] for m in viewer_methods()}
+
+
+def viewer_predictions(wildcards):
+    return [f"results/predictions/{wildcards.task}/{m}.zarr" for m in viewer_methods()]
+
+
+def viewer_metrics(wildcards):
+    return [f"results/metrics/{wildcards.task}/{m}.parquet" for m in viewer_methods()]
+
+
+def viewer_outputs():
+    """The static viewer of every task, where the config asks for it (figures.viewer.export)."""
+    if not config["figures"]["viewer"]["export"]:
+        return []
+    return [f"results/viewer/{task}.html" for task in config["scenes"]["tasks"]]
+
+
 def claims_outputs():
     """The claims table, where the config has claims."""
     return ["results/tables/claims.csv"] if config["claims"] else []
@@ -465,7 +490,8 @@ def final_outputs():
     ]) + [f"results/tables/{t}.csv" for t in TABLES] + claims_outputs() + prediction_outputs() + [
         f"results/models/{task}/checks.json" for task in tasks if checked_components()] + [
         f"results/figures/{kind}_{task}.png" for task in tasks for kind in ("scenes", "predictions")] + [
-        f"results/figures/compare_{name}_{task}.png" for task in tasks for name in config["figures"]["comparisons"]]
+        f"results/figures/compare_{name}_{task}.png" for task in tasks for name in config["figures"]["comparisons"]
+    ] + viewer_outputs()
 
 
 def catalog_outputs(wildcards):
