@@ -9,12 +9,12 @@ PY := $(VENV)/bin/python
 SNAKEMAKE := $(PY) -m snakemake
 STAMP := $(VENV)/.tohgs-setup
 
-.PHONY: reproduce test setup lint dryrun benchmark report clean
+.PHONY: reproduce test setup browser lint dryrun benchmark report clean
 
 reproduce: $(STAMP)
 	$(SNAKEMAKE) --cores $(CORES) $(TARGET)
 
-test: $(STAMP)
+test: $(STAMP) browser
 	$(PY) -m pytest -p no:dash
 	$(SNAKEMAKE) --lint
 	$(SNAKEMAKE) --dry-run --quiet rules --cores $(CORES) $(TARGET)
@@ -34,9 +34,21 @@ $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q torch==2.13.0
-	$(PY) -m pip install -q -e ".[test]"
-	@$(PY) -c "import tohgs, torch, open3d, pybullet, coacd, snakemake; print('tohgs environment ready: torch', torch.__version__)"
+	$(PY) -m pip install -q -e ".[test,viewer]"
+	@$(PY) -c "import tohgs, torch, open3d, pybullet, coacd, snakemake, viser; print('tohgs environment ready: torch', torch.__version__)"
 	@touch $@
+
+# The viewer's tests (tests/test_viewer.py) load it in headless Chromium: Debian's package, installed as root;
+# otherwise those tests skip, saying so.
+browser:
+	@if ! command -v chromium >/dev/null 2>&1; then \
+	  if [ "$$(id -u)" = "0" ]; then \
+	    echo "installing chromium (the viewer's tests)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; \
+	  else \
+	    echo "the viewer's browser tests need chromium (they skip without it): sudo apt-get install -y chromium" >&2; \
+	  fi; \
+	fi
 
 # the HTML report of a finished run: tables and figures with their captions (workflow/report/)
 report: $(STAMP)

@@ -50,12 +50,7 @@ def _smoke_config(workdir: Path) -> dict:
     return validate_config(yaml.safe_load((workdir / ".test/config/config.yaml").read_text()), base_dir=workdir)
 
 
-@pytest.fixture(scope="module")
-def smoke_run(tmp_path_factory) -> Path:
-    work = copy_workflow(tmp_path_factory.mktemp("smoke"))
-    out = _snakemake(work)
-    assert out.returncode == 0, (out.stdout + out.stderr)[-5000:]
-    return work
+# smoke_run (tests/conftest.py): the smoke run, once per session (the viewer's tests read it too)
 
 
 # Task grasps every training split of the smoke run must keep. A split with none cannot train, and
