@@ -105,6 +105,34 @@ def test_every_method_has_a_hand_at_both_poses_with_its_metric_row(placing, resu
     assert np.allclose(d_init, d_goal, atol=1e-4)
 
 
+@pytest.mark.slow
+def test_a_skinned_hand_is_posed_like_its_vertices(placing):
+    """The joint frames a static export sends, applied as three.js skins a mesh (linear blend skinning from
+    the bind pose: the rest joints, unrotated), give the hand's vertices."""
+    import viser
+    from scipy.spatial.transform import Rotation
+
+    from tohgs.viz.view import add_hand
+
+    hand = placing.hand
+    obj, c = placing.configurations[0]
+    grasp = placing.hands(obj, c, 0)[0].grasps["goal"]
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        handle = add_hand(server.scene, "/hand", hand, grasp, (255, 0, 0), skinned=True)
+        frames = [(np.asarray(b.wxyz), np.asarray(b.position)) for b in handle.bones]
+    finally:
+        server.stop()
+    joints = np.asarray(hand.rest_joints)
+    skin = np.zeros((len(hand.rest_vertices), 3))
+    for j, (wxyz, pos) in enumerate(frames):
+        R = Rotation.from_quat([wxyz[1], wxyz[2], wxyz[3], wxyz[0]]).as_matrix()
+        skin += hand.weights[:, j:j + 1] * ((hand.rest_vertices - joints[j]) @ R.T + pos)
+    want = hand.vertices(grasp[None])[0]
+    assert np.abs(skin - want).max() < 1e-5
+    assert np.abs(want - hand.vertices(placing.hands(obj, c, 0)[0].grasps["init"][None])[0]).max() > 1e-3
+
+
 def _partial_results(results: Path, dest: Path, damaged: str | None = None) -> Path:
     """A results folder of links to ``results``' parts, with a copy of the prediction store ``damaged`` of
     placing (if given) whose grasps' chunk is cut short."""
@@ -206,7 +234,7 @@ def test_the_viewer_shows_the_scene_and_the_picture_follows_the_controls(results
 @pytest.mark.slow
 @needs_chromium
 def test_the_static_export_renders_offline_in_chromium(results, tmp_path):
-    from tohgs.viz.view import export_html
+    from tohgs.viz.view import REPORT_BYTES, export_html
 
     html = results / "viewer/placing.html"  # the workflow's (rule viewer), else written here
     if not html.exists():
@@ -214,10 +242,22 @@ def test_the_static_export_renders_offline_in_chromium(results, tmp_path):
         export_html(TaskResults.from_results(results, "placing"), html)
     text = html.read_text()
     assert "__VISER_EMBED_DATA__" in text and 100_000 < len(text) < 30_000_000
+    assert len(text) < REPORT_BYTES, "over what the report's frame shows"
+    data = TaskResults.from_results(results, "placing")
     requests: list[str] = []
     with vb.browser() as ctx:
         page = vb.open_page(ctx, html.resolve().as_uri(), requests)
         shot = vb.wait_for_scene(page)
         vb.save(shot, tmp_path / "static.png")
-    assert vb.scene_fraction(shot) > 0.05, "the static export shows no scene"
-    assert requests and not vb.outside(requests), f"the export fetched: {vb.outside(requests)[:5]}"
+        assert vb.scene_fraction(shot) > 0.05, "the static export shows no scene"
+        assert requests and not vb.outside(requests), f"the export fetched: {vb.outside(requests)[:5]}"
+        # its skinned hands draw what the hands' vertices draw (one configuration, the first method)
+        shots = []
+        for skinned in (True, False):
+            one = tmp_path / f"one_{skinned}.html"
+            export_html(data, one, configs=1, methods=list(data.methods)[:1], skinned=skinned)
+            page.close()
+            page = vb.open_page(ctx, one.resolve().as_uri(), [])
+            shots.append(vb.wait_for_scene(page))
+            vb.save(shots[-1], tmp_path / f"one_{skinned}.png")
+    assert vb.changed(*shots) < 0.01, "the skinned hands are not where their vertices are"

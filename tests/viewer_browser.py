@@ -55,7 +55,8 @@ def browser() -> Iterator:
 
 def open_page(ctx, url: str, requests: list[str]):
     """A page of ``url`` whose requests are appended to ``requests``, notices hidden."""
-    page = ctx.pages[0] if ctx.pages else ctx.new_page()
+    blank = [p for p in ctx.pages if p.url == "about:blank"]
+    page = blank[0] if blank else ctx.new_page()
     page.on("request", lambda r: requests.append(r.url))
     page.goto(url)
     page.add_style_tag(content=HIDE_NOTICES)

@@ -108,6 +108,33 @@ class HandAssets:
         """(8,) vertex ids of the palm's contact candidates; their mean is the palm centre."""
         return np.asarray(self.contact_ids)[-PALM_CONTACTS:]
 
+    def joint_frames(self, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The posed joints' world frames of grasp vectors (zero betas), in float64: what skins the mesh.
+
+        Args:
+            pose: (B, 51) grasp vectors (see :meth:`vertices`).
+
+        Returns:
+            ``R`` (B, 16, 3, 3) the joints' rotations and ``P`` (B, 16, 3) their positions, m, with the grasp's
+            translation: the rest vertex ``v`` skinned by joint ``j`` goes to ``R[j] (v - rest_joints[j]) +
+            P[j]`` (before the pose blend shapes, which :meth:`vertices` adds in the rest frame).
+        """
+        pose = np.asarray(pose, dtype=np.float64)
+        if pose.ndim != 2 or pose.shape[1] != POSE_DIM:
+            raise ValueError(f"pose must have shape (B, {POSE_DIM}), got {pose.shape}")
+        b = len(pose)
+        rot = rotvec_to_matrix(pose[:, 3:].reshape(b, N_JOINTS, 3))  # (B, 16, 3, 3)
+        j = np.asarray(self.rest_joints, dtype=np.float64)
+        R = np.empty_like(rot)
+        P = np.empty((b, N_JOINTS, 3))
+        R[:, 0], P[:, 0] = rot[:, 0], j[0]
+        for level in LEVELS[1:]:
+            ks = list(level)
+            ps = [PARENTS[k] for k in ks]
+            R[:, ks] = R[:, ps] @ rot[:, ks]
+            P[:, ks] = P[:, ps] + (R[:, ps] @ (j[ks] - j[ps])[None, :, :, None])[..., 0]
+        return R, P + pose[:, None, :3]
+
     def vertices(self, pose: np.ndarray) -> np.ndarray:
         """Hand vertices of grasp vectors at zero betas, without torch.
 
@@ -121,27 +148,17 @@ class HandAssets:
         Returns:
             (B, V, 3) vertices, m.
         """
-        pose = np.asarray(pose, dtype=np.float64)
-        if pose.ndim != 2 or pose.shape[1] != POSE_DIM:
-            raise ValueError(f"pose must have shape (B, {POSE_DIM}), got {pose.shape}")
-        b = len(pose)
-        rot = rotvec_to_matrix(pose[:, 3:].reshape(b, N_JOINTS, 3))  # (B, 16, 3, 3)
+        R, P = self.joint_frames(pose)
+        b = len(R)
         j = np.asarray(self.rest_joints, dtype=np.float64)
         v_rest = np.broadcast_to(np.asarray(self.rest_vertices, dtype=np.float64), (b,) + self.rest_vertices.shape)
         if self.pose_dirs is not None:
+            rot = rotvec_to_matrix(np.asarray(pose, dtype=np.float64)[:, 3:].reshape(b, N_JOINTS, 3))
             feat = (rot[:, 1:] - np.eye(3)).reshape(b, 135)
             v_rest = v_rest + (feat @ np.asarray(self.pose_dirs, np.float64).reshape(-1, 135).T).reshape(b, -1, 3)
-        R = np.empty_like(rot)
-        P = np.empty((b, N_JOINTS, 3))
-        R[:, 0], P[:, 0] = rot[:, 0], j[0]
-        for level in LEVELS[1:]:
-            ks = list(level)
-            ps = [PARENTS[k] for k in ks]
-            R[:, ks] = R[:, ps] @ rot[:, ks]
-            P[:, ks] = P[:, ps] + (R[:, ps] @ (j[ks] - j[ps])[None, :, :, None])[..., 0]
         A = np.concatenate([R, (P - (R @ j[None, :, :, None])[..., 0])[..., None]], -1)  # (B, 16, 3, 4)
         T = (np.asarray(self.weights, np.float64) @ A.reshape(b, N_JOINTS, 12)).reshape(b, -1, 3, 4)  # (B, V, 3, 4)
-        return (T[..., :3] @ v_rest[..., None])[..., 0] + T[..., 3] + pose[:, None, :3]
+        return (T[..., :3] @ v_rest[..., None])[..., 0] + T[..., 3]
 
     def save(self, path: str | Path) -> None:
         """Write to an ``.npz`` (atomically, byte-identical for identical assets: the archive's entries carry

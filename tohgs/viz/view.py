@@ -25,7 +25,8 @@ from typing import Any
 import numpy as np
 
 from tohgs.metrics.tables import QualityThresholds
-from tohgs.viz.view_data import (DISTANCE_MAPS, GROUND_TRUTH, NO_MAP, POSES, HandView, TaskResults,
+from tohgs.hand.assets import HandAssets
+from tohgs.viz.view_data import (DISTANCE_MAPS, GROUND_TRUTH, NO_MAP, POSES, HandView, Part, TaskResults,
                                  available_tasks, default_labels)
 
 log = logging.getLogger(__name__)
@@ -44,6 +45,9 @@ POSE_CHOICES = {"both": POSES, "initial": ("init",), "goal": ("goal",)}
 CLOUD_OFFSET = 0.0015  # m along the normals: the cloud sits just outside the target's surface
 POINT_SIZE = 0.004  # m
 LINE = 0.012  # m between the static export's metric lines
+#: The largest static export the report shows: it embeds the file as a base64 data: URL in a frame, and Chromium
+#: refuses URLs over 2 MiB (2,097,152 characters, 4/3 of the file).
+REPORT_BYTES = 1_500_000
 
 
 def require_viser():
@@ -96,6 +100,43 @@ def _mesh(scene, name: str, vertices: np.ndarray, faces: np.ndarray, rgb: tuple[
                                  opacity=opacity, cast_shadow=False, receive_shadow=False, **kw)
 
 
+def _part(scene, name: str, part: Part) -> Any:
+    """A scene part: its mesh in its own frame placed at its pose (a static export then holds each object's
+    mesh once, however many configurations and poses place it)."""
+    q = np.asarray(part.pose[3:], dtype=np.float64)
+    return _mesh(scene, name, part.mesh.vertices, part.mesh.faces, SCENE_RGB[part.kind],
+                 position=tuple(part.pose[:3]), wxyz=(q[3], q[0], q[1], q[2]))
+
+
+def add_hand(scene, name: str, hand: HandAssets, grasp: np.ndarray, rgb: tuple[int, int, int],
+             opacity: float | None = None, visible: bool = True, skinned: bool = False) -> Any:
+    """A hand of a (51,) world-frame grasp vector. ``skinned``: the rest mesh skinned by the posed joints
+    (viser's skinned mesh, linear blend skinning as :meth:`~tohgs.hand.assets.HandAssets.vertices`: exact for a
+    hand without pose blend shapes, such as anny's): every hand then shares one mesh, weights and faces, and
+    only its 16 joint frames differ, so a static export of many hands stays small. Otherwise the posed
+    vertices."""
+    from scipy.spatial.transform import Rotation
+
+    faces = np.asarray(hand.closed_faces)
+    if not skinned:
+        return _mesh(scene, name, hand.vertices(np.asarray(grasp)[None])[0], faces, rgb, opacity=opacity,
+                     visible=visible)
+    if hand.pose_dirs is not None:
+        raise ValueError(f"hand '{hand.name}' has pose blend shapes: skinning alone would not pose it exactly")
+    R, P = hand.joint_frames(np.asarray(grasp)[None])
+    joints = np.asarray(hand.rest_joints, dtype=np.float32)
+    handle = scene.add_mesh_skinned(
+        name, np.asarray(hand.rest_vertices, np.float32), faces.astype(np.uint32),
+        bone_wxyzs=np.tile(np.array([1.0, 0.0, 0.0, 0.0], np.float32), (len(joints), 1)), bone_positions=joints,
+        skin_weights=np.asarray(hand.weights, np.float32), color=rgb, opacity=opacity, cast_shadow=False,
+        receive_shadow=False, visible=visible)
+    quats = Rotation.from_matrix(R[0]).as_quat()  # (16, 4) xyzw
+    for j, bone in enumerate(handle.bones):
+        bone.wxyz = (quats[j, 3], quats[j, 0], quats[j, 1], quats[j, 2])
+        bone.position = tuple(P[0, j])
+    return handle
+
+
 def configure_scene(scene) -> None:
     """z up, the default lights without shadows."""
     scene.set_up_direction("+z")
@@ -108,13 +149,10 @@ def draw_configuration(scene, data: TaskResults, obj: str, c: int, root: str, ma
     ``map_name`` at each of ``poses``. Returns the handles by name (``target_<pose>``, ``cloud_<pose>``)."""
     handles: dict[str, Any] = {}
     for i, part in enumerate(data.parts(obj, c)):
-        handles[f"part_{i}"] = _mesh(scene, f"{root}/scene/{part.kind}_{i}", part.mesh.vertices, part.mesh.faces,
-                                     SCENE_RGB[part.kind])
+        handles[f"part_{i}"] = _part(scene, f"{root}/scene/{part.kind}_{i}", part)
     values = data.map_values(obj, c, map_name, sample)
     for pose in poses:
-        target = data.target(obj, c, pose)
-        handles[f"target_{pose}"] = _mesh(scene, f"{root}/target_{pose}", target.vertices, target.faces,
-                                          SCENE_RGB["target"])
+        handles[f"target_{pose}"] = _part(scene, f"{root}/target_{pose}", data.target_part(obj, c, pose))
         if values is not None:
             pts, nrm = data.cloud(obj, c, pose)
             handles[f"cloud_{pose}"] = scene.add_point_cloud(
@@ -364,13 +402,16 @@ def _spread(configurations: list[tuple[str, int]], n: int) -> list[tuple[str, in
 
 
 def export_html(data: TaskResults, out: str | Path, configs: int = 4, samples: int = 1,
-                methods: list[str] | None = None) -> dict[str, Any]:
+                methods: list[str] | None = None, skinned: bool | None = None) -> dict[str, Any]:
     """Write one self-contained HTML file (viser's embedded scene) of a task: ``configs`` test configurations
     (one per object first) side by side along x, each with its scene, the target at both poses and its cloud
     coloured by the ground-truth contact map (else the first method's), and the first ``samples`` grasps of
     each of ``methods`` (default: all) at both poses with a label of each grasp's metrics. The first
     :data:`SHOWN` methods are visible at the start; the scene tree of the page (its top-right button) shows and
-    hides each method (``/hands/<method>``). Returns what was drawn (configurations, methods, hands, bytes).
+    hides each method (``/hands/<method>``). ``skinned`` (default: where exact, a hand without pose blend
+    shapes) sends the hands as one skinned mesh and joint frames each (:func:`add_hand`), otherwise vertex by
+    vertex. Returns what was drawn (configurations, methods, hands, bytes); a file over :data:`REPORT_BYTES` is
+    logged as a warning, since the report shows it in a frame of a ``data:`` URL, which Chromium caps at 2 MB.
     """
     from tohgs.io import atomic_path
 
@@ -380,15 +421,16 @@ def export_html(data: TaskResults, out: str | Path, configs: int = 4, samples: i
     if missing:
         raise ValueError(f"task '{data.task}': no prediction store of {', '.join(missing)} among the inputs")
     picks = _spread(data.configurations, configs)
+    skinned = data.hand.pose_dirs is None if skinned is None else skinned
     colors = method_colors(names, list(default_labels()))
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     hands = 0
     try:
         scene = server.scene
         configure_scene(scene)
-        parts = [data.parts(o, c) for o, c in picks]
-        lo = np.min([p.mesh.bounds[0] for ps in parts for p in ps], axis=0)
-        hi = np.max([p.mesh.bounds[1] for ps in parts for p in ps], axis=0)
+        parts = [[p.world() for p in data.parts(o, c)] for o, c in picks]
+        lo = np.min([m.bounds[0] for ms in parts for m in ms], axis=0)
+        hi = np.max([m.bounds[1] for ms in parts for m in ms], axis=0)
         step = float(hi[0] - lo[0]) + 0.3  # configurations side by side along x, 30 cm apart
         for k, (obj, c) in enumerate(picks):
             offset = (k * step, 0.0, 0.0)
@@ -412,8 +454,8 @@ def export_html(data: TaskResults, out: str | Path, configs: int = 4, samples: i
                     if h is None:
                         continue
                     for pose in POSES:
-                        _mesh(scene, f"{frame}/{s}_{pose}", h.vertices[pose], data.hand_faces, colors[name][1],
-                              opacity=None if h.kept else 0.45)
+                        add_hand(scene, f"{frame}/{s}_{pose}", data.hand, h.grasps[pose], colors[name][1],
+                                 opacity=None if h.kept else 0.45, skinned=skinned)
                         hands += 1
                     # a column of metric lines beside the targets, in scene units: they never overlap
                     scene.add_label(f"{frame}/{s}_metrics", f"{h.label} ({colors[name][0]}) #{s}: {h.summary()}",
@@ -432,6 +474,10 @@ def export_html(data: TaskResults, out: str | Path, configs: int = 4, samples: i
     info = {"task": data.task, "configurations": [f"{o} #{c}" for o, c in picks], "methods": names, "hands": hands,
             "bytes": len(html.encode())}
     log.info("wrote %s: %s", out, info)
+    if info["bytes"] > REPORT_BYTES:
+        log.warning("%s: %.1f MB, over the %.1f MB that the report's frame (a data: URL) shows in Chromium: open the "
+                    "file itself (fewer figures.viewer.configs or samples make it smaller)", out, info["bytes"] / 1e6,
+                    REPORT_BYTES / 1e6)
     return info
 
 

@@ -98,11 +98,20 @@ class MethodResults:
 
 @dataclass(frozen=True)
 class Part:
-    """A mesh of a configuration's scene in the world frame: ``kind`` is ``support``, ``base`` or ``obstacle``."""
+    """A mesh of a configuration's scene: ``kind`` is ``support``, ``base``, ``obstacle`` or ``target``; ``mesh``
+    in its own frame (shared by every configuration that places the same object) at world ``pose``
+    ``[x, y, z, qx, qy, qz, qw]``."""
 
     kind: str
     name: str
     mesh: trimesh.Trimesh
+    pose: np.ndarray
+
+    def world(self) -> trimesh.Trimesh:
+        """The mesh in the world frame."""
+        from tohgs.geometry.grasp import pose_matrix
+
+        return self.mesh.copy().apply_transform(pose_matrix(self.pose))
 
 
 @dataclass(frozen=True)
@@ -113,6 +122,7 @@ class HandView:
         method, label: the method's name and label.
         sample: the sample index shown (the configuration's sample ``sample`` of the method).
         kept: False for a grasp the method discarded (F-GraspTTA's filter); it is still drawn.
+        grasps: ``{"init": (51,), "goal": (51,)}`` the grasp vectors at both poses (world frame).
         vertices: ``{"init": (V, 3), "goal": (V, 3)}`` world-frame hand vertices at both poses, m.
         metrics: the grasp's metric row (``pv`` m^3, ``sd`` m, ``contact_distance`` m, ``init_opp``,
             ``goal_opp`` fractions) or None where the method was not evaluated.
@@ -123,6 +133,7 @@ class HandView:
     label: str
     sample: int
     kept: bool
+    grasps: dict[str, np.ndarray]
     vertices: dict[str, np.ndarray]
     metrics: dict[str, float] | None
     quality: bool | None
@@ -303,27 +314,33 @@ class TaskResults:
         sc = self.scenes[obj]
         return (sc.target_init_pose if pose == "init" else sc.target_goal_pose)[c]
 
-    def parts(self, obj: str, c: int) -> list[Part]:
-        """The configuration's scene without the target (:func:`tohgs.geometry.scene.scene_meshes`): the
-        support, the base brick (Stacking) and the obstacles, world frame."""
-        from tohgs.geometry.scene import scene_meshes
+    def _mesh(self, name: str, support: bool = False) -> trimesh.Trimesh:
+        """An object's mesh (checked against its recorded checksum) or a support's, in its own frame, once."""
+        from tohgs.assets.mesh import object_mesh
 
+        key = f"support:{name}" if support else name
+        if key not in self._meshes:
+            self._meshes[key] = self.supports[name].mesh() if support else object_mesh(self.objects_dir, name)
+        return self._meshes[key]
+
+    def parts(self, obj: str, c: int) -> list[Part]:
+        """The configuration's scene without the target: the support (table or shelf), the base brick
+        (Stacking) and the obstacles, placed as :func:`tohgs.geometry.scene.scene_meshes` places them."""
         sc = self.scenes[obj]
-        meshes = scene_meshes(sc, c, self.objects_dir, self.supports, self._meshes)
-        names = [("support", sc.support(c)[0])]
+        name, pose = sc.support(c)
+        out = [Part("support", name, self._mesh(name, support=True), np.asarray(pose))]
         if sc.base(c) is not None:
-            names.append(("base", sc.base(c)[0]))
-        names += [("obstacle", o) for o, _ in sc.obstacles(c)]
-        return [Part(kind, name, mesh) for (kind, name), mesh in zip(names, meshes)]
+            name, pose = sc.base(c)
+            out.append(Part("base", name, self._mesh(name), np.asarray(pose)))
+        return out + [Part("obstacle", o, self._mesh(o), np.asarray(p)) for o, p in sc.obstacles(c)]
+
+    def target_part(self, obj: str, c: int, pose: str) -> Part:
+        """The target at ``pose``."""
+        return Part("target", obj, self._mesh(obj), np.asarray(self.target_pose(obj, c, pose)))
 
     def target(self, obj: str, c: int, pose: str) -> trimesh.Trimesh:
         """The target's mesh at ``pose``, world frame."""
-        from tohgs.assets.mesh import object_mesh
-        from tohgs.geometry.grasp import pose_matrix
-
-        if obj not in self._meshes:
-            self._meshes[obj] = object_mesh(self.objects_dir, obj)
-        return self._meshes[obj].copy().apply_transform(pose_matrix(self.target_pose(obj, c, pose)))
+        return self.target_part(obj, c, pose).world()
 
     def cloud(self, obj: str, c: int, pose: str) -> tuple[np.ndarray, np.ndarray]:
         """The object cloud of the configuration's test shard ((N, 3) points, (N, 3) unit normals) at ``pose``,
@@ -370,8 +387,8 @@ class TaskResults:
         i = m.rows.get((obj, c))
         if i is None or not 0 <= sample < m.samples:
             return None
-        verts = {pose: self.hand.vertices(m.arrays[f"grasp_{pose}"][i, sample][None].astype(np.float64))[0]
-                 for pose in POSES}
+        grasps = {pose: np.asarray(m.arrays[f"grasp_{pose}"][i, sample], np.float64) for pose in POSES}
+        verts = {pose: self.hand.vertices(g[None])[0] for pose, g in grasps.items()}
         kept = bool(m.arrays["kept"][i, sample])
         metrics, quality = None, None
         if m.metrics is not None and (obj, c, sample) in m.metrics.index:
@@ -379,7 +396,7 @@ class TaskResults:
             metrics = {k: float(row[k]) for k in ("pv", "sd", "contact_distance", "init_opp", "goal_opp")}
             if kept and np.isfinite(metrics["pv"]) and np.isfinite(metrics["sd"]):
                 quality = bool(metrics["pv"] < self.thresholds.max_pv and metrics["sd"] < self.thresholds.max_sd)
-        return HandView(method, m.label, sample, kept, verts, metrics, quality)
+        return HandView(method, m.label, sample, kept, grasps, verts, metrics, quality)
 
     def hands(self, obj: str, c: int, sample: int) -> list[HandView]:
         """Every method's grasp ``sample`` of the configuration (the methods that predicted it), in method order."""
