@@ -64,6 +64,18 @@ def test_the_camera_looks_at_the_target_from_the_open_side():
     assert np.allclose(look, [0.5, 0, 0]) and np.linalg.norm(eye - look) >= 1.4  # both targets in view
 
 
+def test_a_large_mesh_is_decimated_once_for_the_export_and_keeps_its_shape():
+    import trimesh
+
+    from tohgs.viz.view import decimated
+
+    sphere = trimesh.creation.icosphere(subdivisions=4)  # 5120 faces
+    cache: dict = {}
+    small = decimated(sphere, 1000, cache)
+    assert len(small.faces) <= 1000 and np.allclose(small.bounds, sphere.bounds, atol=0.05)
+    assert decimated(sphere, 1000, cache) is small and decimated(sphere, 10_000) is sphere
+
+
 @pytest.mark.slow
 def test_the_cloud_lies_on_the_target_at_both_poses_and_the_maps_are_the_stores(placing):
     import trimesh

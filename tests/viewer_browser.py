@@ -148,7 +148,7 @@ def start_viewer(results: str | Path, task: str, stop_after: float = 300.0, time
     raise RuntimeError(f"the viewer did not start ({' '.join(cmd)}): {''.join(lines)[-3000:]}")
 
 
-def screenshot(results: str | Path, out: str | Path, task: str = "placing", width: int = 1100) -> None:
+def screenshot(results: str | Path, out: str | Path, task: str = "placing", width: int = 1000) -> None:
     """The README's picture: the viewer on ``results`` at its start, the whole page (panel and scene), as a PNG
     ``width`` pixels wide."""
     from PIL import Image

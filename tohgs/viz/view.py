@@ -48,6 +48,7 @@ LINE = 0.012  # m between the static export's metric lines
 #: The largest static export the report shows: it embeds the file as a base64 data: URL in a frame, and Chromium
 #: refuses URLs over 2 MiB (2,097,152 characters, 4/3 of the file).
 REPORT_BYTES = 1_500_000
+EXPORT_FACES = 4000  # most triangles of an object mesh in a static export (:func:`decimated`)
 
 
 def require_viser():
@@ -100,12 +101,31 @@ def _mesh(scene, name: str, vertices: np.ndarray, faces: np.ndarray, rgb: tuple[
                                  opacity=opacity, cast_shadow=False, receive_shadow=False, **kw)
 
 
-def _part(scene, name: str, part: Part) -> Any:
-    """A scene part: its mesh in its own frame placed at its pose (a static export then holds each object's
-    mesh once, however many configurations and poses place it)."""
+def decimated(mesh, max_faces: int | None, cache: dict[int, Any] | None = None):
+    """``mesh`` with at most ``max_faces`` triangles (open3d's quadric decimation; the mesh itself when it has
+    fewer or ``max_faces`` is None), once per mesh object in ``cache``: a static export keeps its size in
+    check with objects of tens of thousands of faces, and every placement of an object shares one buffer."""
+    if max_faces is None or len(mesh.faces) <= max_faces:
+        return mesh
+    cache = {} if cache is None else cache
+    if id(mesh) not in cache:
+        import open3d as o3d
+        import trimesh
+
+        m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.asarray(mesh.vertices, np.float64)),
+                                      o3d.utility.Vector3iVector(np.asarray(mesh.faces, np.int32)))
+        m = m.simplify_quadric_decimation(target_number_of_triangles=max_faces)
+        cache[id(mesh)] = (mesh, trimesh.Trimesh(np.asarray(m.vertices), np.asarray(m.triangles), process=False))
+    return cache[id(mesh)][1]
+
+
+def _part(scene, name: str, part: Part, max_faces: int | None = None, cache: dict[int, Any] | None = None) -> Any:
+    """A scene part: its mesh in its own frame (decimated to ``max_faces``, :func:`decimated`) placed at its
+    pose (a static export then holds each object's mesh once, however many configurations and poses place it)."""
     q = np.asarray(part.pose[3:], dtype=np.float64)
-    return _mesh(scene, name, part.mesh.vertices, part.mesh.faces, SCENE_RGB[part.kind],
-                 position=tuple(part.pose[:3]), wxyz=(q[3], q[0], q[1], q[2]))
+    mesh = decimated(part.mesh, max_faces, cache)
+    return _mesh(scene, name, mesh.vertices, mesh.faces, SCENE_RGB[part.kind], position=tuple(part.pose[:3]),
+                 wxyz=(q[3], q[0], q[1], q[2]))
 
 
 def add_hand(scene, name: str, hand: HandAssets, grasp: np.ndarray, rgb: tuple[int, int, int],
@@ -144,15 +164,18 @@ def configure_scene(scene) -> None:
 
 
 def draw_configuration(scene, data: TaskResults, obj: str, c: int, root: str, map_name: str, sample: int = 0,
-                       poses: tuple[str, ...] = POSES) -> dict[str, Any]:
+                       poses: tuple[str, ...] = POSES, max_faces: int | None = None,
+                       cache: dict[int, Any] | None = None) -> dict[str, Any]:
     """Add configuration ``c`` of ``obj`` under ``root``: the scene parts, the target and its cloud coloured by
-    ``map_name`` at each of ``poses``. Returns the handles by name (``target_<pose>``, ``cloud_<pose>``)."""
+    ``map_name`` at each of ``poses`` (meshes decimated to ``max_faces``, :func:`decimated`). Returns the
+    handles by name (``part_<i>``, ``target_<pose>``, ``cloud_<pose>``)."""
     handles: dict[str, Any] = {}
     for i, part in enumerate(data.parts(obj, c)):
-        handles[f"part_{i}"] = _part(scene, f"{root}/scene/{part.kind}_{i}", part)
+        handles[f"part_{i}"] = _part(scene, f"{root}/scene/{part.kind}_{i}", part, max_faces, cache)
     values = data.map_values(obj, c, map_name, sample)
     for pose in poses:
-        handles[f"target_{pose}"] = _part(scene, f"{root}/target_{pose}", data.target_part(obj, c, pose))
+        handles[f"target_{pose}"] = _part(scene, f"{root}/target_{pose}", data.target_part(obj, c, pose), max_faces,
+                                          cache)
         if values is not None:
             pts, nrm = data.cloud(obj, c, pose)
             handles[f"cloud_{pose}"] = scene.add_point_cloud(
@@ -402,7 +425,8 @@ def _spread(configurations: list[tuple[str, int]], n: int) -> list[tuple[str, in
 
 
 def export_html(data: TaskResults, out: str | Path, configs: int = 4, samples: int = 1,
-                methods: list[str] | None = None, skinned: bool | None = None) -> dict[str, Any]:
+                methods: list[str] | None = None, skinned: bool | None = None,
+                max_faces: int | None = EXPORT_FACES) -> dict[str, Any]:
     """Write one self-contained HTML file (viser's embedded scene) of a task: ``configs`` test configurations
     (one per object first) side by side along x, each with its scene, the target at both poses and its cloud
     coloured by the ground-truth contact map (else the first method's), and the first ``samples`` grasps of
@@ -410,7 +434,8 @@ def export_html(data: TaskResults, out: str | Path, configs: int = 4, samples: i
     :data:`SHOWN` methods are visible at the start; the scene tree of the page (its top-right button) shows and
     hides each method (``/hands/<method>``). ``skinned`` (default: where exact, a hand without pose blend
     shapes) sends the hands as one skinned mesh and joint frames each (:func:`add_hand`), otherwise vertex by
-    vertex. Returns what was drawn (configurations, methods, hands, bytes); a file over :data:`REPORT_BYTES` is
+    vertex. Object meshes of more than ``max_faces`` triangles are decimated to that (the scene is context;
+    the live viewer draws them whole). Returns what was drawn (configurations, methods, hands, bytes); a file over :data:`REPORT_BYTES` is
     logged as a warning, since the report shows it in a frame of a ``data:`` URL, which Chromium caps at 2 MB.
     """
     from tohgs.io import atomic_path
@@ -422,6 +447,7 @@ def export_html(data: TaskResults, out: str | Path, configs: int = 4, samples: i
         raise ValueError(f"task '{data.task}': no prediction store of {', '.join(missing)} among the inputs")
     picks = _spread(data.configurations, configs)
     skinned = data.hand.pose_dirs is None if skinned is None else skinned
+    cache: dict[int, Any] = {}
     colors = method_colors(names, list(default_labels()))
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     hands = 0
@@ -437,7 +463,7 @@ def export_html(data: TaskResults, out: str | Path, configs: int = 4, samples: i
             cell = f"/configs/{obj}_{c}"
             scene.add_frame(cell, show_axes=False, position=offset)
             map_name = GROUND_TRUTH if data.ground_truth_count(obj, c) else f"contact: {data.methods[names[0]].label}"
-            draw_configuration(scene, data, obj, c, cell, map_name)
+            draw_configuration(scene, data, obj, c, cell, map_name, max_faces=max_faces, cache=cache)
             top = max(float(data.target(obj, c, p).bounds[1][2]) for p in POSES)
             for pose in POSES:
                 p = data.target_pose(obj, c, pose)[:3]
@@ -502,6 +528,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--samples", type=int, default=1, help="with --export: grasps per method and configuration")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    logging.getLogger("websockets").setLevel(logging.WARNING)  # not every connection
     try:
         labels, thresholds = None, QualityThresholds()
         if args.configfile:
