@@ -435,8 +435,9 @@ def export_html(data: TaskResults, out: str | Path, configs: int = 4, samples: i
     hides each method (``/hands/<method>``). ``skinned`` (default: where exact, a hand without pose blend
     shapes) sends the hands as one skinned mesh and joint frames each (:func:`add_hand`), otherwise vertex by
     vertex. Object meshes of more than ``max_faces`` triangles are decimated to that (the scene is context;
-    the live viewer draws them whole). Returns what was drawn (configurations, methods, hands, bytes); a file over :data:`REPORT_BYTES` is
-    logged as a warning, since the report shows it in a frame of a ``data:`` URL, which Chromium caps at 2 MB.
+    the live viewer draws them whole). Returns what was drawn (configurations, methods, hands, bytes); a file
+    over :data:`REPORT_BYTES` is logged as a warning, since the report shows it in a frame of a ``data:`` URL,
+    which Chromium caps at 2 MB.
     """
     from tohgs.io import atomic_path
 
