@@ -274,15 +274,17 @@ N_MAPS = 6  # 3 tasks x (1 train + 1 test) shards in the smoke config (no valida
 # table2, table4, table5), each with a row of every task.
 N_COMPONENTS, N_METHODS, N_TABLES = 9, 11, 4
 MODELS = {"train": 3 * N_COMPONENTS, "predict": 3 * N_METHODS, "model_checks": 3}
-# The evaluation of every task's predictions.
-EVALUATION = {"evaluate": 3 * N_METHODS, "table": N_TABLES, "claims": 1, "predictions_figure": 3, "contact_maps_figure": 1}
+# The evaluation of every task's predictions (and the viewer's static export of each task, rule viewer, which
+# draws every table row's predictions with their metrics).
+EVALUATION = {"evaluate": 3 * N_METHODS, "table": N_TABLES, "claims": 1, "predictions_figure": 3, "contact_maps_figure": 1,
+              "viewer": 3}
 
 
 def _evaluated(methods_per_task: int, tasks: int = 3) -> dict[str, int]:
     """The evaluation jobs after ``methods_per_task`` prediction stores of ``tasks`` tasks changed (the
     figures read ``ours`` of every task; every table has a row read from ``ours``)."""
     return {"evaluate": methods_per_task * tasks, "table": N_TABLES, "claims": 1, "predictions_figure": tasks,
-            "contact_maps_figure": 1}
+            "contact_maps_figure": 1, "viewer": tasks}
 
 
 def _downstream(n_maps: int) -> dict[str, int]:
@@ -339,10 +341,11 @@ def test_editing_code_makes_exactly_its_stage_stale(smoke_run):
         assert _stale_jobs(smoke_run) == {"all": 1, "objects_figure": 1, "hand_figure": 1, "scenes_figure": 3,
                                           "prior_figure": 1, "maps_figure": 1, "predictions_figure": 3,
                                           "contact_maps_figure": 1}
-    with _edited(smoke_run / "tohgs/metrics/tables.py"):
-        assert _stale_jobs(smoke_run) == {"all": 1, "table": N_TABLES, "claims": 1}
+    with _edited(smoke_run / "tohgs/metrics/tables.py"):  # the viewer reads the metric rows with it
+        assert _stale_jobs(smoke_run) == {"all": 1, "table": N_TABLES, "claims": 1, "viewer": 3}
     with _edited(smoke_run / "tohgs/metrics/evaluate.py"):
-        assert _stale_jobs(smoke_run) == {"all": 1, "evaluate": 3 * N_METHODS, "table": N_TABLES, "claims": 1}
+        assert _stale_jobs(smoke_run) == {"all": 1, "evaluate": 3 * N_METHODS, "table": N_TABLES, "claims": 1,
+                                          "viewer": 3}
     with _edited(smoke_run / "tohgs/sim/world.py"):
         assert _stale_jobs(smoke_run) == {"all": 1, "scenes": n_scenes, "scenes_figure": 3, "task_grasps": n_task,
                                           **_downstream(fed)}
@@ -423,19 +426,23 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
     # GraspTTA's predictions), not ours (nor the contact-maps figure, which shows ours).
     tta = dict(cfg["prediction"]["tta"], steps=cfg["prediction"]["tta"]["steps"] + 1)
     assert stale_with(("prediction", dict(cfg["prediction"], tta=tta))) == {
-        "all": 1, "predict": 15, "evaluate": 15, "table": 3, "claims": 1, "predictions_figure": 3}  # not table5
+        "all": 1, "predict": 15, "evaluate": 15, "table": 3, "claims": 1, "predictions_figure": 3,
+        "viewer": 3}  # not table5
     # A training setting: that component's trainings, their predictions, their evaluation and the tables.
     grasp = dict(cfg["components"]["grasp_diffuser"]["training"], steps=cfg["components"]["grasp_diffuser"]["training"]["steps"] + 1)
     assert stale_with(("components.grasp_diffuser.training", grasp)) == {"all": 1, "train": 3, "predict": 6,
                                                                          "model_checks": 3, **_evaluated(2)}  # ours, cc-gd
-    # A QR threshold or the table's rows: the tables only; a label: the tables only.
-    assert stale_with(("evaluation.qr", {"max_pv": 2.0e-06, "max_sd": 0.02})) == {"all": 1, "table": N_TABLES, "claims": 1}
+    # A QR threshold or the table's rows: the tables (and the viewer's verdicts and methods) only; a label: the
+    # tables and what names the method.
+    assert stale_with(("evaluation.qr", {"max_pv": 2.0e-06, "max_sd": 0.02})) == {"all": 1, "table": N_TABLES, "claims": 1,
+                                                                                  "viewer": 3}
     assert stale_with(("evaluation.bootstrap", {"samples": 50})) == {"all": 1, "table": N_TABLES, "claims": 1}
     # (every component stays in use: the predictions figure draws every method of Table 1)
-    assert stale_with(("tables.table1", {"rows": ["ours"]})) == {"all": 1, "table": 1, "claims": 1}
+    assert stale_with(("tables.table1", {"rows": ["ours"]})) == {"all": 1, "table": 1, "claims": 1, "viewer": 3}
     assert stale_with(("methods.ours", {"label": "Ours (CD + GD)", "kind": "contact_grasp", "contact": "contact_diffuser",
                                         "grasp": "grasp_diffuser"})) == {
-        "all": 1, "table": 1, "claims": 1, "predictions_figure": 3, "contact_maps_figure": 1}  # table1's label, the figures'
+        "all": 1, "table": 1, "claims": 1, "predictions_figure": 3, "contact_maps_figure": 1,
+        "viewer": 3}  # table1's label, the figures', the viewer's
     # The dumps above sort the keys: the order of keys in a config file is not a change.
     assert stale_with(("seed", cfg["seed"])) == {}
 
