@@ -107,9 +107,25 @@ def adapt(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_ne
         energy and its terms (one value per step, before the step, with the vertices kept at that step;
         the last after the last step, searched afresh).
     """
+    out, histories = adapt_many(hand, grasp, points, contact_net, alpha, settings, [grasp.shape[0]])
+    return out, histories[0]
+
+
+def adapt_many(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_net, alpha: float,
+               settings: TTASettings, sizes: list[int]) -> tuple[torch.Tensor, list[dict[str, list[float]]]]:
+    """:func:`adapt` of several problems (e.g. the S hands of each of several test configurations, each on
+    its own object) as one batch: the B = sum(``sizes``) hands in order, problem ``p`` the next
+    ``sizes[p]`` rows of ``grasp`` (B, 51) and ``points`` (B, N, 3). Every term is per hand and SGD is
+    per number, so a hand's result does not depend on the others in the batch.
+
+    Returns:
+        The adapted (B, 51) grasps and one history per problem (the mean over its hands, as :func:`adapt`).
+    """
+    if sum(sizes) != grasp.shape[0] or any(n < 1 for n in sizes):
+        raise ValueError(f"the problem sizes {sizes} must be positive and add up to the {grasp.shape[0]} hands")
     g = clamp_to_limits(grasp.detach().clone(), hand.joint_limits).requires_grad_(True)
     opt = torch.optim.SGD([g], lr=settings.lr, momentum=settings.momentum)
-    history: dict[str, list[float]] = {}
+    per_step: list[dict[str, torch.Tensor]] = []  # each step's (B,) terms, averaged per problem at the end
     with torch.no_grad():
         features = contact_net.object_features(points)
     nearest = None
@@ -118,8 +134,7 @@ def adapt(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_ne
             search = step % settings.search_every == 0 or step == settings.steps
             terms = tta_energy(hand, g, points, contact_net, alpha, settings, features, None if search else nearest)
             nearest = terms.pop("nearest")
-            for k, v in terms.items():
-                history.setdefault(k, []).append(float(v.detach().mean()))
+            per_step.append({k: v.detach() for k, v in terms.items()})
             if step == settings.steps:
                 break
             opt.zero_grad(set_to_none=True)
@@ -127,4 +142,15 @@ def adapt(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_ne
             opt.step()
             with torch.no_grad():
                 g.copy_(clamp_to_limits(g, hand.joint_limits))
-    return g.detach(), history
+    return g.detach(), problem_histories(per_step, sizes)
+
+
+def problem_histories(per_step: list[dict[str, torch.Tensor]], sizes: list[int]) -> list[dict[str, list[float]]]:
+    """Per problem (consecutive ``sizes`` rows of the B hands), the mean of each recorded (B,) term at each
+    step that recorded it."""
+    keys = list(dict.fromkeys(k for step in per_step for k in step))  # in order of appearance
+    out, start = [], 0
+    for n in sizes:
+        out.append({k: [float(step[k][start:start + n].mean()) for step in per_step if k in step] for k in keys})
+        start += n
+    return out
