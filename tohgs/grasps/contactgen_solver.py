@@ -37,7 +37,7 @@ import torch
 
 from tohgs.geometry.contact_parts import N_PARTS, PartContact, part_contact
 from tohgs.geometry.hand_object import distance_to_vertices, nearest_index, vertex_normals
-from tohgs.grasps.tta import clamp_to_limits, problem_histories
+from tohgs.grasps.tta import clamp_to_limits, pose_problems, problem_histories
 from tohgs.hand.model import HandModel
 
 CONTACTGEN_POINTS = 2048  # ContactGen's object points: the point sums are scaled to this many
@@ -101,7 +101,8 @@ def default_start(hand: HandModel, batch: int) -> torch.Tensor:
 
 def solver_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, target: PartContact,
                   settings: SolverSettings, stage: str, contact_sel: tuple[torch.Tensor, torch.Tensor],
-                  nearest: dict | None = None, search: bool = True) -> dict[str, torch.Tensor]:
+                  nearest: dict | None = None, search: bool = True, sizes: list[int] | None = None
+                  ) -> dict[str, torch.Tensor]:
     """The weighted terms (B,) and their sum ``"energy"`` of (B, 51) grasps for the (B, N, 3) points'
     ``target`` representation; ``stage`` ``global`` (contact, direction) or ``pose`` (every term);
     ``contact_sel`` the (B, K) indices of the contact points and their (B, K) weights (0 for padding).
@@ -109,11 +110,12 @@ def solver_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, ta
     ``nearest`` keeps the nearest-vertex indices between calls (``part``: (B, K) of the contact points in
     their parts; ``hand``: (B, N) of every point in the hand, with ``normal`` (B, N, 3) that vertex's
     outward normal when it was found): they are searched when ``search`` is true or not yet there, and
-    reused otherwise (module docstring)."""
+    reused otherwise (module docstring). ``sizes``: the hands of each problem when several are solved
+    together (:func:`tohgs.grasps.tta.pose_problems`)."""
     s = settings
     nearest = {} if nearest is None else nearest
     scale = CONTACTGEN_POINTS / points.shape[1]
-    out = hand(grasp)
+    out = pose_problems(hand, grasp, sizes)
     idx, weight = contact_sel
     sel_points = torch.gather(points, 1, idx[..., None].expand(-1, -1, 3))
     if search or "part" not in nearest:
@@ -190,7 +192,7 @@ def solve_many(hand: HandModel, points: torch.Tensor, target: PartContact, setti
         opt = torch.optim.Adam(params, lr=lr)
         for step in range(steps):
             terms = solver_energy(hand, torch.cat([glob, fingers], -1), points, target, settings, stage, sel,
-                                  nearest, search=step % settings.search_every == 0)
+                                  nearest, search=step % settings.search_every == 0, sizes=sizes)
             per_step.append({k: v.detach() for k, v in terms.items()})
             opt.zero_grad(set_to_none=True)
             terms["energy"].sum().backward()
@@ -205,7 +207,7 @@ def solve_many(hand: HandModel, points: torch.Tensor, target: PartContact, setti
         descend([glob, fingers], settings.pose_lr, settings.pose_steps, "pose")
         grasp = torch.cat([glob, fingers], -1).detach()
         per_step.append({k: v.detach() for k, v in solver_energy(hand, grasp, points, target, settings, "pose", sel,
-                                                                  nearest).items()})
+                                                                  nearest, sizes=sizes).items()})
     return grasp, problem_histories(per_step, sizes)
 
 

@@ -42,7 +42,7 @@ import torch
 from tohgs.geometry.cloud import (CloudIndex, clearance_violation, cloud_distance, cloud_signed_distance_at,
                                   even_subset)
 from tohgs.grasps.synthesis import SynthesisSettings, initial_grasps
-from tohgs.grasps.tta import clamp_to_limits
+from tohgs.grasps.tta import by_problem, clamp_to_limits, pose_problems
 from tohgs.hand.layout import FINGERS
 from tohgs.hand.model import HandModel
 
@@ -139,7 +139,7 @@ class FlexProblem:
     def energy(self, grasp: torch.Tensor, z: torch.Tensor, search: bool = True) -> dict[str, torch.Tensor]:
         """The weighted terms (B,) and their sum ``"energy"`` of (B, 51) grasps with (B, L) latents."""
         s = self.s
-        verts = self.hand(grasp).vertices
+        verts = pose_problems(self.hand, grasp, [grasp.shape[0] // self.n_configs] * self.n_configs).vertices
         sub = verts[:, self.sub]
         cand = verts[:, self.hand.contact_ids]
         goal = self.at_goal(sub)
@@ -163,7 +163,7 @@ class FlexProblem:
     def opp(self, grasp: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(B,) each hand's share of (subset) vertices inside the scene cloud at the initial and the goal pose."""
         with torch.no_grad():
-            sub = self.hand(grasp).vertices[:, self.sub]
+            sub = pose_problems(self.hand, grasp, [grasp.shape[0] // self.n_configs] * self.n_configs).vertices[:, self.sub]
             out = []
             for pts in (sub, self.at_goal(sub)):
                 ss = cloud_signed_distance_at(pts, *self.scene_flat, self._nearest(self.scenes, pts))
@@ -238,8 +238,8 @@ def optimise_many(hand: HandModel, prior, points: torch.Tensor, normals: torch.T
     for p in prior.parameters():
         p.requires_grad_(False)
 
-    def grasp_of(z_, rot_, trans_):
-        fingers = prior.decode(z_)
+    def grasp_of(z_, rot_, trans_):  # the prior per configuration: its products' rounding is then the same alone
+        fingers = by_problem(prior.decode, [len(z_) // n_cfg] * n_cfg, z_)
         return clamp_to_limits(torch.cat([trans_, rot_, fingers], -1), hand.joint_limits)
 
     def rows(order: torch.Tensor, width: int) -> torch.Tensor:

@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from tohgs.config import settings_from
-from tohgs.grasps.tta import TTASettings, adapt_many
+from tohgs.grasps.tta import TTASettings, adapt_many, by_problem, pose_problems
 from tohgs.methods.base import Method, Prediction, Request, gt_rows
 from tohgs.methods.contact_grasp import GROUND_TRUTH, NO_CONTACT, smooth_contact
 
@@ -89,7 +89,9 @@ class GraspTTA(Method):
         if own:  # what the adaptation aimed at: ContactNet's map for the adapted hand
             rows = torch.cat([torch.arange(sum(sizes[:j]), sum(sizes[:j + 1])) for j in own])
             with torch.no_grad():
-                maps = self.contact_net.predict_map(points[rows], self.hand(grasp[rows]).vertices)
+                own_sizes = [sizes[j] for j in own]
+                verts = pose_problems(self.hand, grasp[rows], own_sizes).vertices
+                maps = by_problem(self.contact_net.predict_map, own_sizes, points[rows], verts)
             for j, m in zip(own, maps.split([sizes[j] for j in own])):
                 net_maps[j] = m
         for j, ((i, _, contact, _, seconds), g, history) in enumerate(zip(staged, grasp.split(sizes), histories)):
