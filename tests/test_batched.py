@@ -15,7 +15,7 @@ from tests.test_flex import _prior
 from tohgs.data.batch import Batch
 from tohgs.geometry.contact_parts import PartContact
 from tohgs.geometry.maps import sample_surface
-from tohgs.geometry.registration import ICPSettings, register, register_many, register_open3d
+from tohgs.geometry.registration import ICPSettings, register, register_many
 from tohgs.grasps.contactgen_solver import SolverSettings, representation_of, solve, solve_many
 from tohgs.grasps.flex import FlexSettings, optimise, optimise_many
 from tohgs.grasps.tta import TTASettings, adapt, adapt_many
@@ -130,7 +130,7 @@ def _icp_pairs() -> list[tuple[np.ndarray, np.ndarray]]:
     return pairs
 
 
-def test_icp_of_several_configurations_equals_each_alone_and_open3d():
+def test_icp_of_several_configurations_equals_each_alone():
     pairs = _icp_pairs()
     settings = ICPSettings(z_turns=1, max_iterations=15)
     together = register_many(pairs, settings)
@@ -138,9 +138,6 @@ def test_icp_of_several_configurations_equals_each_alone_and_open3d():
         alone = register(src, tgt, settings)
         np.testing.assert_array_equal(reg.transform, alone.transform)
         assert (reg.fitness, reg.chamfer) == (alone.fitness, alone.chamfer)
-        ref = register_open3d(src, tgt, settings)  # the reference: one open3d ICP per start
-        np.testing.assert_allclose(reg.transform, ref.transform, atol=1e-9)
-        assert reg.fitness == ref.fitness and reg.chamfer == pytest.approx(ref.chamfer, abs=1e-12)
     with pytest.raises(ValueError, match="at least 3 points"):
         register_many([pairs[0], (pairs[1][0][:2], pairs[1][1])], settings)
 

@@ -12,8 +12,9 @@ with that estimate; the hands with more than ``max_opp`` of their vertices insid
 or the estimated goal pose are discarded (the prediction's ``kept`` flags). The stored goal grasps stay the
 base method's, carried with the true transform: a hand that holds the object goes where the object goes,
 and the estimate only decides what is kept. The ICP error against the true transform and the share kept
-are recorded per configuration (the store's ``diagnostics``). The registrations of ``chunk``
-configurations run as one batch (the same estimates as one at a time).
+are recorded per configuration (the store's ``diagnostics``). The goal transforms of ``chunk``
+configurations are estimated together (:func:`estimate_goal_transforms`; the same estimates as one at a
+time).
 """
 
 from __future__ import annotations
@@ -79,7 +80,7 @@ def estimate_goal_transform(object_points: np.ndarray, init_scene: np.ndarray, g
 def estimate_goal_transforms(views: list[tuple[np.ndarray, np.ndarray, np.ndarray]], icp: ICPSettings,
                              moved_distance: float) -> list[tuple[np.ndarray, int]]:
     """:func:`estimate_goal_transform` of several configurations' (object points, initial scene, goal
-    scene), their registrations run as one batch (:func:`tohgs.geometry.registration.register_many`)."""
+    scene), their registrations by :func:`tohgs.geometry.registration.register_many`."""
     from scipy.spatial import cKDTree
 
     out: list[tuple[np.ndarray, int]] = []
