@@ -16,6 +16,7 @@ from typing import Any
 import jsonschema
 import yaml
 
+from tohgs.assets.sources import ycb_mesh_folder
 from tohgs.methods import NOT_COMPONENT_KEYS, method_components, method_kind_exists
 from tohgs.models import component_kind_exists
 
@@ -119,10 +120,20 @@ def _semantic_checks(cfg: Mapping[str, Any], base_dir: Path) -> None:
             p = base_dir / p
         if not p.is_dir():
             raise ConfigError(f"config key 'objects.sources.dir.path': folder '{dir_path}' does not exist")
-    n_total = src["pybullet_data"]["random_urdfs"] + src["pybullet_data"]["named"] + src["bricks"]["count"]
+    ycb = src["ycb"]
+    if ycb["count"] and ycb["names"] is not None:
+        raise ConfigError("config key 'objects.sources.ycb': set either count (a seeded draw from the curated list) "
+                          "or names (these meshes), not both")
+    n_ycb = ycb["count"] + len(ycb["names"] or [])
+    if n_ycb:
+        try:
+            ycb_mesh_folder()
+        except (ModuleNotFoundError, FileNotFoundError) as err:
+            raise ConfigError(f"config key 'objects.sources.ycb': {err}") from None
+    n_total = src["pybullet_data"]["random_urdfs"] + src["pybullet_data"]["named"] + src["bricks"]["count"] + n_ycb
     if n_total == 0 and dir_path is None:
         raise ConfigError("config key 'objects.sources': the selection is empty (no pybullet_data objects, "
-                          "no bricks and no dir.path)")
+                          "no bricks, no YCB objects and no dir.path)")
 
 
 def _validate_part(value: Any, schema: Mapping[str, Any], where: str) -> None:
