@@ -57,7 +57,7 @@ else:
     try:
         OBJECTS = {spec.name: spec for spec in select_objects(config["objects"], config["seed"], skipped=SKIPPED_FILES)}
         check_split_sizes(Counter(spec.task_set for spec in OBJECTS.values()), config["objects"]["split"], TASK_SETS)
-    except (ValueError, FileNotFoundError) as err:
+    except (ValueError, FileNotFoundError, ModuleNotFoundError) as err:
         raise WorkflowError(f"invalid configuration: {err}") from None
 for _file, _reason in SKIPPED_FILES:
     print(f"objects.sources.dir: skipped {_file}: {_reason}", file=sys.stderr)
@@ -68,7 +68,7 @@ def imported(path):
     return os.path.join(OFFICIAL, path)
 
 
-OBJECT_NAME = "(pb|brick|dir|off)-[a-z0-9-]+"  # the {object} wildcard (tohgs.assets.sources, tohgs.data.official)
+OBJECT_NAME = "(pb|brick|dir|ycb|off)-[a-z0-9-]+"  # the {object} wildcard (tohgs.assets.sources, tohgs.data.official)
 
 
 def objects_dir_of_supports(wildcards, input):
