@@ -23,6 +23,7 @@ def _objects_cfg(**counts):
     o = copy.deepcopy(cfg["objects"])
     o["sources"]["pybullet_data"].update(random_urdfs=counts.get("random", 5), named=counts.get("named", 2))
     o["sources"]["bricks"]["count"] = counts.get("bricks", 3)
+    o["sources"]["ycb"]["count"] = counts.get("ycb", 0)
     return o
 
 
