@@ -112,7 +112,7 @@ def grasp_rng(seed: int, obj: str, config_index: int, sample: int) -> np.random.
 def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | Path], objects_dir: str | Path,
                          supports_json: str | Path, hand: HandAssets, sd: dict, voxel_pitch: float = 0.001,
                          cache_dir: str | Path | None = None, progress: bool = False,
-                         robust_sd: dict | None = None) -> pd.DataFrame:
+                         robust_sd: dict | None = None, threads: int = 1) -> pd.DataFrame:
     """One row per predicted grasp (columns :data:`COLUMNS`) of one task and method.
 
     Args:
@@ -129,6 +129,8 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
         robust_sd: a config mapping of :class:`~tohgs.metrics.quality.RobustSDSettings` (None or
             ``perturbations: 0``: no robust SD). Column ``sd_perturbed`` holds each grasp's K perturbed SDs,
             m (an empty list for a grasp without them).
+        threads: the job's cores: SD runs in that many worker processes
+            (:meth:`~tohgs.metrics.quality.DisplacementSimulator.displacements`; the same numbers as one).
     """
     from tohgs.assets.supports import read_supports
 
@@ -164,7 +166,7 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
                 raise ValueError(f"{prediction_store}: configuration index {c} of {name!r} is out of range ({len(sc)})")
             obj = _object_assets(objects_dir, name, voxel_pitch, assets, cache_dir)
             if name not in sims:
-                sims[name] = DisplacementSimulator(obj.collision, obj.vertex_mean, s_sd)
+                sims[name] = DisplacementSimulator(obj.collision, obj.vertex_mean, s_sd, workers=threads)
             collider = SceneCollider(scene_meshes(sc, c, objects_dir, supports, meshes))
             kept = np.asarray(arrays["kept"][i], bool)
             m, ds = {}, float("nan")  # DS of a configuration that a filter left fewer than two grasps: none
