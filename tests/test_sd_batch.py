@@ -79,13 +79,13 @@ def test_batched_sd_equals_the_one_hand_protocol_bit_for_bit(u_brick, hands, dir
     gravity = sd_gravity(settings, verts[:, palm].mean(1), world_centre)
     with DisplacementSimulator(path, centre, settings) as sim:
         reference = np.array([sim.displacement(v, faces, POSE, g) for v, g in zip(verts, gravity)])
-        in_process = sim.displacements(verts, faces, POSE, gravity)
+        one_worker = sim.displacements(verts, faces, POSE, gravity)
     with DisplacementSimulator(path, centre, settings, workers=2) as sim:
         pooled = sim.displacements(verts, faces, POSE, gravity)
         again = sim.displacements(verts[::-1], faces, POSE, gravity[::-1])  # other chunks, other order
     # a set of grasps that tells SDs apart: some held (under QR's 2 cm), some lost
     assert (reference < 0.02).sum() >= 2 and (reference > 0.02).sum() >= 2, reference
-    np.testing.assert_array_equal(in_process, reference)
+    np.testing.assert_array_equal(one_worker, reference)
     np.testing.assert_array_equal(pooled, reference)
     np.testing.assert_array_equal(again[::-1], reference)
 
@@ -110,6 +110,19 @@ def test_robust_sd_in_one_batch_equals_each_start_simulated_alone(u_brick, hands
     np.testing.assert_array_equal(q["sd"], protocol)
 
 
+def test_the_workers_are_replaced_after_recycle_after_hands_with_the_same_sd(u_brick, hands):
+    path, _, centre = u_brick
+    verts, faces, _, _ = hands
+    with DisplacementSimulator(path, centre, workers=1, recycle_after=3) as sim:
+        first = sim.displacements(verts[:3], faces, POSE)
+        pool = sim._pool  # the workers of the first 3 hands
+        second = sim.displacements(verts[:3], faces, POSE)
+        assert sim._pool is not pool  # fresh processes for the next hands (PyBullet's memory given back)
+        reference = [sim.displacement(v, faces, POSE) for v in verts[:3]]
+    np.testing.assert_array_equal(first, reference)
+    np.testing.assert_array_equal(second, reference)
+
+
 def _die(*args, **kwargs):
     """A chunk that kills its worker process, as a native crash would."""
     os.kill(os.getpid(), signal.SIGKILL)
@@ -120,6 +133,8 @@ def test_a_dead_worker_is_a_clear_error_and_bad_arguments_are_refused(u_brick, h
     verts, faces, _, _ = hands
     with pytest.raises(ValueError, match="at least one worker"):
         DisplacementSimulator(path, centre, workers=0)
+    with pytest.raises(ValueError, match="recycle_after >= 1"):
+        DisplacementSimulator(path, centre, recycle_after=0)
     with DisplacementSimulator(path, centre, workers=2) as sim:
         with pytest.raises(ValueError, match=r"shape \(B, V, 3\)"):
             sim.displacements(verts[0], faces)

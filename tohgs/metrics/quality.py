@@ -9,7 +9,7 @@
   code's setting, not the paper's "1 s"); SD is how far the object's centre moved, m; a failed simulation
   counts 0.10 m. Many hands: :meth:`DisplacementSimulator.displacements` runs the same protocol per hand,
   bit for bit, in ``workers`` processes (nearly all of SD's time is PyBullet's contact detection and
-  solver, the protocol's physics itself; see docs/scale.md). Gravity is a setting (``gravity_direction``): the official code applies it along +y of
+  solver, the protocol's physics itself; see docs/stages.md). Gravity is a setting (``gravity_direction``): the official code applies it along +y of
   its camera-derived frame, which has no meaning for tohgs's grasps. ``"away_from_palm"`` (the default)
   pulls the object from the palm centre through the object's centre: the direction it is lifted against
   when the hand approaches from the free side of its support (a table top, a shelf board), whatever
@@ -144,9 +144,11 @@ class DisplacementSimulator:
     """SD for many hands on one object.
 
     :meth:`displacement` is the protocol for one hand, the reference: a fresh world per hand (reset, the
-    hand's triangle mesh, the object's collision parts parsed from ``collision_obj``, 35 steps).
-    :meth:`displacements` gives the same SD for a batch of hands, bit for bit, from ``workers`` processes
-    that each run :meth:`displacement` on their share (``workers=1``: in this process).
+    hand's triangle mesh, the object's collision parts parsed from ``collision_obj``, 35 steps), in this
+    process. :meth:`displacements` gives the same SD for a batch of hands, bit for bit, from ``workers``
+    processes that each run :meth:`displacement` on their share. Worker processes also bound memory:
+    PyBullet keeps about 0.6 MB per simulated hand until its process ends (``resetSimulation`` and
+    ``disconnect`` do not free it), so the workers are replaced after ``recycle_after`` hands.
 
     Args:
         collision_obj: the object's convex decomposition (``collision.obj`` of the objects stage), in the
@@ -155,21 +157,26 @@ class DisplacementSimulator:
         settings: the protocol.
         workers: processes of :meth:`displacements` (forked on its first call, ended by :meth:`close`);
             a job's cores (Snakemake's ``threads``).
+        recycle_after: hands the workers simulate before they are replaced by fresh processes (between
+            two :meth:`displacements` calls).
     """
 
     collision_obj: str | Path
     vertex_mean: np.ndarray
     settings: SDSettings = field(default_factory=SDSettings)
     workers: int = 1
+    recycle_after: int = 500
 
     def __post_init__(self) -> None:
         from tohgs.sim.client import DirectClient
 
-        if int(self.workers) < 1:
-            raise ValueError(f"DisplacementSimulator needs at least one worker, got workers={self.workers}")
+        if int(self.workers) < 1 or int(self.recycle_after) < 1:
+            raise ValueError(f"DisplacementSimulator needs at least one worker and recycle_after >= 1, got "
+                             f"workers={self.workers}, recycle_after={self.recycle_after}")
         self.workers = int(self.workers)
         self._client = DirectClient()
         self._pool: ProcessPoolExecutor | None = None
+        self._pool_hands = 0  # hands the current workers have simulated
 
     def close(self) -> None:
         """Disconnect the client and end the worker processes."""
@@ -226,9 +233,9 @@ class DisplacementSimulator:
     def displacements(self, hand_vertices: np.ndarray, hand_faces: np.ndarray, object_pose: np.ndarray | None = None,
                       gravity: np.ndarray | None = None, solver_iterations: np.ndarray | None = None,
                       progress: bool = False) -> np.ndarray:
-        """SD of B hands, m: :meth:`displacement` of each, the same numbers bit for bit, in ``workers``
-        processes when there are several (each hand is simulated alone in a freshly reset world, so which
-        process simulates it, and after which other hands, does not change its SD).
+        """SD of B hands, m: :meth:`displacement` of each, the same numbers bit for bit, in the ``workers``
+        processes (each hand is simulated alone in a freshly reset world, so which process simulates it, and
+        after which other hands, does not change its SD).
 
         Args:
             hand_vertices: (B, V, 3) metres, world frame.
@@ -253,14 +260,6 @@ class DisplacementSimulator:
 
             bar = tqdm(total=b, desc="SD", mininterval=5.0)
         try:
-            if self.workers == 1 or b < 2:
-                out = np.empty(b)
-                for i in range(b):
-                    out[i] = self.displacement(hv[i], hand_faces, object_pose, None if g is None else g[i],
-                                               None if iters is None else int(iters[i]))
-                    if bar is not None:
-                        bar.update(1)
-                return out
             return self._pooled(hv, np.asarray(hand_faces), object_pose, g, iters, bar)
         finally:
             if bar is not None:
@@ -271,9 +270,14 @@ class DisplacementSimulator:
         """:meth:`displacements` in the worker processes: the hands in contiguous chunks (about four per
         worker, so that a slow chunk does not hold the others up), put back in order."""
         b = len(hv)
+        if self._pool is not None and self._pool_hands >= self.recycle_after:
+            self._pool.shutdown()  # fresh processes give back the memory PyBullet kept
+            self._pool = None
         if self._pool is None:
             # fork, not spawn: spawn re-runs the parent's __main__ (a Snakemake script) in each worker.
             self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("fork"))
+            self._pool_hands = 0
+        self._pool_hands += b
         size = max(1, math.ceil(b / (4 * self.workers)))
         starts = range(0, b, size)
         futures: list[Future] = [
