@@ -101,7 +101,8 @@ def test_robust_sd_in_one_batch_equals_each_start_simulated_alone(u_brick, hands
                          robust_rngs=[np.random.default_rng([7, k]) for k in range(4)])
         reference = np.full((4, 2), np.nan)
         for k in range(3):
-            starts, iterations = perturbed_starts(verts[k], robust, np.random.default_rng([7, k]), settings.solver_iterations)
+            starts, iterations = perturbed_starts(verts[k], robust, np.random.default_rng([7, k]),
+                                                  settings.solver_iterations)
             reference[k] = [sim.displacement(h, faces, POSE, np.array(PAPER_GRAVITY), int(n))
                             for h, n in zip(starts, iterations)]
         protocol = [sim.displacement(v, faces, POSE, np.array(PAPER_GRAVITY)) for v in verts[:4]]

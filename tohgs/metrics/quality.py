@@ -7,14 +7,14 @@
   restitution 0); the object its convex decomposition, mass 1, friction 3, restitution 0.5, its inertial
   frame at the mesh's vertex mean; time step 1/240 s, 150 solver iterations, 35 steps (the official
   code's setting, not the paper's "1 s"); SD is how far the object's centre moved, m; a failed simulation
-  counts 0.10 m. Many hands: :meth:`DisplacementSimulator.displacements` runs the same protocol per hand,
-  bit for bit, in ``workers`` processes (nearly all of SD's time is PyBullet's contact detection and
-  solver, the protocol's physics itself; see docs/stages.md). Gravity is a setting (``gravity_direction``): the official code applies it along +y of
+  counts 0.10 m. Gravity is a setting (``gravity_direction``): the official code applies it along +y of
   its camera-derived frame, which has no meaning for tohgs's grasps. ``"away_from_palm"`` (the default)
   pulls the object from the palm centre through the object's centre: the direction it is lifted against
   when the hand approaches from the free side of its support (a table top, a shelf board), whatever
   orientation the object rests in; ``"fixed"`` uses the ``gravity`` vector of the grasp's frame (for
-  grasps in the world frame, -z).
+  grasps in the world frame, -z). Many hands: :meth:`DisplacementSimulator.displacements` runs the same
+  protocol per hand, bit for bit, in ``workers`` processes (nearly all of SD's time is PyBullet's contact
+  detection and solver, the protocol's physics itself; docs/stages.md, "Where SD's time goes").
 - Robust SD (beyond the protocol): SD again under K tiny perturbations of the start (the hand moved by at
   most half a millimetre, the solver's iterations jittered), for a few grasps per configuration
   (:class:`RobustSDSettings`); the protocol's single SD stays the paper's QR.
@@ -253,7 +253,8 @@ class DisplacementSimulator:
             raise ValueError(f"hand_vertices must have shape (B, V, 3), got {hv.shape}")
         b = len(hv)
         g = None if gravity is None else np.broadcast_to(np.asarray(gravity, dtype=np.float64), (b, 3))
-        iters = None if solver_iterations is None else np.broadcast_to(np.asarray(solver_iterations, dtype=np.int64), (b,))
+        iters = (None if solver_iterations is None else
+                 np.broadcast_to(np.asarray(solver_iterations, dtype=np.int64), (b,)))
         bar = None
         if progress:
             from tqdm import tqdm
@@ -280,9 +281,10 @@ class DisplacementSimulator:
         self._pool_hands += b
         size = max(1, math.ceil(b / (4 * self.workers)))
         starts = range(0, b, size)
+        mean = np.asarray(self.vertex_mean, dtype=np.float64)
         futures: list[Future] = [
-            self._pool.submit(_displacement_chunk, str(self.collision_obj), np.asarray(self.vertex_mean, dtype=np.float64),
-                              self.settings, hv[a:a + size], faces, object_pose, None if g is None else g[a:a + size],
+            self._pool.submit(_displacement_chunk, str(self.collision_obj), mean, self.settings, hv[a:a + size], faces,
+                              object_pose, None if g is None else g[a:a + size],
                               None if iters is None else iters[a:a + size])
             for a in starts]
         out = np.empty(b)
@@ -414,8 +416,8 @@ def hand_quality(hand_vertices: np.ndarray, faces: np.ndarray, palm_ids: np.ndar
         if n:  # the n hands' K starts each, simulated as one batch (:func:`perturbed_displacements` per hand)
             starts = [perturbed_starts(hand_vertices[i], robust, robust_rngs[i], sim.settings.solver_iterations)
                       for i in range(n)]
-            sds = sim.displacements(np.concatenate([h for h, _ in starts]), faces, pose, np.repeat(gravity[:n], k, axis=0),
-                                    np.concatenate([it for _, it in starts]))
+            sds = sim.displacements(np.concatenate([h for h, _ in starts]), faces, pose,
+                                    np.repeat(gravity[:n], k, axis=0), np.concatenate([it for _, it in starts]))
             perturbed[:n] = sds.reshape(n, k)
         out["sd_perturbed"] = perturbed
     return out
