@@ -14,7 +14,7 @@ from tohgs.assets.objects import prepare_object
 from tohgs.assets.sources import ObjectSpec
 from tohgs.config import validate_config
 from tohgs.hand import load_hand_assets
-from tohgs.metrics.quality import (DisplacementSimulator, RobustSDSettings, SDSettings, contact_distance,
+from tohgs.metrics.quality import (DisplacementSimulator, RobustSDSettings, SDSettings, SDWorkers, contact_distance,
                                    hand_quality, perturbed_starts, sd_gravity, surface_voxels)
 from tohgs.sim.isolation import SimulationCrash
 
@@ -111,17 +111,32 @@ def test_robust_sd_in_one_batch_equals_each_start_simulated_alone(u_brick, hands
     np.testing.assert_array_equal(q["sd"], protocol)
 
 
-def test_the_workers_are_replaced_after_recycle_after_hands_with_the_same_sd(u_brick, hands):
+def test_workers_shared_by_two_objects_and_replaced_after_recycle_after_hands_give_the_same_sd(u_brick, hands,
+                                                                                              tmp_path):
+    import trimesh
+
     path, _, centre = u_brick
     verts, faces, _, _ = hands
-    with DisplacementSimulator(path, centre, workers=1, recycle_after=3) as sim:
-        first = sim.displacements(verts[:3], faces, POSE)
-        pool = sim._pool  # the workers of the first 3 hands
-        second = sim.displacements(verts[:3], faces, POSE)
-        assert sim._pool is not pool  # fresh processes for the next hands (PyBullet's memory given back)
-        reference = [sim.displacement(v, faces, POSE) for v in verts[:3]]
+    cube = tmp_path / "collision.obj"
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(cube)  # a second object, one part
+    cube_pose = POSE + np.r_[0.0, 0.0, 0.01, 0.0, 0.0, 0.0, 0.0]
+    with SDWorkers(workers=1, recycle_after=5) as workers:
+        with DisplacementSimulator(path, centre, workers=workers) as brick, \
+                DisplacementSimulator(cube, np.zeros(3), workers=workers) as box:
+            first = brick.displacements(verts[:3], faces, POSE)
+            pool = workers._pool  # the processes of the first hands
+            on_box = box.displacements(verts[:3], faces, cube_pose)  # 6 hands: still the same processes
+            assert workers._pool is pool
+            second = brick.displacements(verts[:3], faces, POSE)
+            assert workers._pool is not pool  # past recycle_after: fresh processes (PyBullet's memory back)
+            reference = [brick.displacement(v, faces, POSE) for v in verts[:3]]
+            reference_box = [box.displacement(v, faces, cube_pose) for v in verts[:3]]
+        assert workers._pool is not None  # a shared pool outlives its simulators; its owner ends it
+    assert workers._pool is None
     np.testing.assert_array_equal(first, reference)
     np.testing.assert_array_equal(second, reference)
+    np.testing.assert_array_equal(on_box, reference_box)
+    assert not np.array_equal(on_box, first)
 
 
 def _die(*args, **kwargs):
@@ -135,7 +150,7 @@ def test_a_dead_worker_is_a_clear_error_and_bad_arguments_are_refused(u_brick, h
     with pytest.raises(ValueError, match="at least one worker"):
         DisplacementSimulator(path, centre, workers=0)
     with pytest.raises(ValueError, match="recycle_after >= 1"):
-        DisplacementSimulator(path, centre, recycle_after=0)
+        SDWorkers(2, recycle_after=0)
     with DisplacementSimulator(path, centre, workers=2) as sim:
         with pytest.raises(ValueError, match=r"shape \(B, V, 3\)"):
             sim.displacements(verts[0], faces)

@@ -37,7 +37,8 @@ from tohgs.data.predictions import read_predictions
 from tohgs.data.scenes import read_scenes
 from tohgs.geometry.scene import SceneCollider, scene_meshes
 from tohgs.hand.assets import HandAssets
-from tohgs.metrics.quality import DisplacementSimulator, RobustSDSettings, SDSettings, hand_quality, surface_voxels
+from tohgs.metrics.quality import (DisplacementSimulator, RobustSDSettings, SDSettings, SDWorkers, hand_quality,
+                                   surface_voxels)
 
 log = logging.getLogger(__name__)
 
@@ -129,8 +130,8 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
         robust_sd: a config mapping of :class:`~tohgs.metrics.quality.RobustSDSettings` (None or
             ``perturbations: 0``: no robust SD). Column ``sd_perturbed`` holds each grasp's K perturbed SDs,
             m (an empty list for a grasp without them).
-        threads: the job's cores: SD runs in that many worker processes
-            (:meth:`~tohgs.metrics.quality.DisplacementSimulator.displacements`; the same numbers as one).
+        threads: the job's cores: SD runs in that many worker processes, shared by the objects
+            (:class:`~tohgs.metrics.quality.SDWorkers`; the same numbers as one).
     """
     from tohgs.assets.supports import read_supports
 
@@ -155,6 +156,7 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
 
         it = tqdm(it, desc=f"evaluate {attrs['task']}/{attrs['method']}", mininterval=5.0)
     sims: dict[str, DisplacementSimulator] = {}
+    workers = SDWorkers(threads)
     try:
         for i in it:
             name = vocab[int(arrays["object_id"][i])]
@@ -166,7 +168,7 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
                 raise ValueError(f"{prediction_store}: configuration index {c} of {name!r} is out of range ({len(sc)})")
             obj = _object_assets(objects_dir, name, voxel_pitch, assets, cache_dir)
             if name not in sims:
-                sims[name] = DisplacementSimulator(obj.collision, obj.vertex_mean, s_sd, workers=threads)
+                sims[name] = DisplacementSimulator(obj.collision, obj.vertex_mean, s_sd, workers=workers)
             collider = SceneCollider(scene_meshes(sc, c, objects_dir, supports, meshes))
             kept = np.asarray(arrays["kept"][i], bool)
             m, ds = {}, float("nan")  # DS of a configuration that a filter left fewer than two grasps: none
@@ -190,5 +192,6 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
     finally:
         for sim in sims.values():
             sim.close()
+        workers.close()
     frame = pd.DataFrame(rows, columns=list(COLUMNS))
     return frame.astype({"config_index": np.int32, "sample": np.int32, "hand_vertices": np.int32, "kept": bool})

@@ -139,50 +139,115 @@ class SDSettings:
     failed_displacement: float = 0.10
 
 
+class SDWorkers:
+    """Worker processes that simulate SD, shared by the simulators of a job (a worker keeps a simulator of
+    each of the last few objects it was given).
+
+    PyBullet keeps about 0.6 MB per simulated hand until its process ends (``resetSimulation`` and
+    ``disconnect`` do not free it), so the workers are replaced by fresh processes once they have simulated
+    ``recycle_after`` hands (between two calls). Forked on first use, ended by :meth:`close`.
+
+    Args:
+        workers: processes (a job's cores, Snakemake's ``threads``).
+        recycle_after: hands before the workers are replaced.
+    """
+
+    def __init__(self, workers: int = 1, recycle_after: int = 500) -> None:
+        if int(workers) < 1 or int(recycle_after) < 1:
+            raise ValueError(f"SD needs at least one worker and recycle_after >= 1, got workers={workers}, "
+                             f"recycle_after={recycle_after}")
+        self.workers, self.recycle_after = int(workers), int(recycle_after)
+        self._pool: ProcessPoolExecutor | None = None
+        self._hands = 0  # hands the current processes have simulated
+
+    def close(self) -> None:
+        """End the worker processes."""
+        if self._pool is not None:
+            self._pool.shutdown(cancel_futures=True)
+            self._pool = None
+
+    def __enter__(self) -> "SDWorkers":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def displacements(self, collision_obj: str | Path, vertex_mean: np.ndarray, settings: SDSettings, hv: np.ndarray,
+                      faces: np.ndarray, object_pose: np.ndarray | None, gravity: np.ndarray | None,
+                      iterations: np.ndarray | None, bar=None) -> np.ndarray:
+        """(B,) SD of the (B, V, 3) hands ``hv`` by :meth:`DisplacementSimulator.displacement` of a simulator
+        of the object (``collision_obj``, ``vertex_mean``, ``settings``) in the workers: the hands in
+        contiguous chunks (about four per worker, so that a slow chunk does not hold the others up), put back
+        in order; ``gravity`` (B, 3) and ``iterations`` (B,) per hand or None (the settings'); ``bar`` a
+        progress bar to advance."""
+        b = len(hv)
+        if self._pool is not None and self._hands >= self.recycle_after:
+            self._pool.shutdown()  # fresh processes give back the memory PyBullet kept
+            self._pool = None
+        if self._pool is None:
+            # fork, not spawn: spawn re-runs the parent's __main__ (a Snakemake script) in each worker.
+            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("fork"))
+            self._hands = 0
+        self._hands += b
+        size = max(1, math.ceil(b / (4 * self.workers)))
+        starts = range(0, b, size)
+        mean = np.asarray(vertex_mean, dtype=np.float64)
+        futures: list[Future] = [
+            self._pool.submit(_displacement_chunk, str(collision_obj), mean, settings, hv[a:a + size], faces, object_pose,
+                              None if gravity is None else gravity[a:a + size],
+                              None if iterations is None else iterations[a:a + size])
+            for a in starts]
+        out = np.empty(b)
+        try:
+            for a, future in zip(starts, futures):
+                chunk = future.result()
+                out[a:a + len(chunk)] = chunk
+                if bar is not None:
+                    bar.update(len(chunk))
+        except BrokenProcessPool as exc:
+            from tohgs.sim.isolation import SimulationCrash
+
+            self._pool = None
+            raise SimulationCrash(f"an SD worker process died while simulating hands on {collision_obj}; "
+                                  "see the log for the native stack") from exc
+        return out
+
+
 @dataclass
 class DisplacementSimulator:
     """SD for many hands on one object.
 
     :meth:`displacement` is the protocol for one hand, the reference: a fresh world per hand (reset, the
     hand's triangle mesh, the object's collision parts parsed from ``collision_obj``, 35 steps), in this
-    process. :meth:`displacements` gives the same SD for a batch of hands, bit for bit, from ``workers``
-    processes that each run :meth:`displacement` on their share. Worker processes also bound memory:
-    PyBullet keeps about 0.6 MB per simulated hand until its process ends (``resetSimulation`` and
-    ``disconnect`` do not free it), so the workers are replaced after ``recycle_after`` hands.
+    process. :meth:`displacements` gives the same SD for a batch of hands, bit for bit, from worker
+    processes (:class:`SDWorkers`) that each run :meth:`displacement` on their share.
 
     Args:
         collision_obj: the object's convex decomposition (``collision.obj`` of the objects stage), in the
             object's mesh frame.
         vertex_mean: (3,) the object's mesh vertex mean in that frame, m: its inertial frame for SD.
         settings: the protocol.
-        workers: processes of :meth:`displacements` (forked on its first call, ended by :meth:`close`);
-            a job's cores (Snakemake's ``threads``).
-        recycle_after: hands the workers simulate before they are replaced by fresh processes (between
-            two :meth:`displacements` calls).
+        workers: the processes of :meth:`displacements`: a number (this simulator's own
+            :class:`SDWorkers`, ended by :meth:`close`) or an :class:`SDWorkers` shared with the job's
+            other simulators (its owner ends it).
     """
 
     collision_obj: str | Path
     vertex_mean: np.ndarray
     settings: SDSettings = field(default_factory=SDSettings)
-    workers: int = 1
-    recycle_after: int = 500
+    workers: int | SDWorkers = 1
 
     def __post_init__(self) -> None:
         from tohgs.sim.client import DirectClient
 
-        if int(self.workers) < 1 or int(self.recycle_after) < 1:
-            raise ValueError(f"DisplacementSimulator needs at least one worker and recycle_after >= 1, got "
-                             f"workers={self.workers}, recycle_after={self.recycle_after}")
-        self.workers = int(self.workers)
+        self._own = not isinstance(self.workers, SDWorkers)
+        self._workers = SDWorkers(self.workers) if self._own else self.workers
         self._client = DirectClient()
-        self._pool: ProcessPoolExecutor | None = None
-        self._pool_hands = 0  # hands the current workers have simulated
 
     def close(self) -> None:
-        """Disconnect the client and end the worker processes."""
-        if self._pool is not None:
-            self._pool.shutdown(cancel_futures=True)
-            self._pool = None
+        """Disconnect the client and end the worker processes if they are this simulator's own."""
+        if self._own:
+            self._workers.close()
         self._client.close()
 
     def __enter__(self) -> "DisplacementSimulator":
@@ -233,7 +298,7 @@ class DisplacementSimulator:
     def displacements(self, hand_vertices: np.ndarray, hand_faces: np.ndarray, object_pose: np.ndarray | None = None,
                       gravity: np.ndarray | None = None, solver_iterations: np.ndarray | None = None,
                       progress: bool = False) -> np.ndarray:
-        """SD of B hands, m: :meth:`displacement` of each, the same numbers bit for bit, in the ``workers``
+        """SD of B hands, m: :meth:`displacement` of each, the same numbers bit for bit, in the worker
         processes (each hand is simulated alone in a freshly reset world, so which process simulates it, and
         after which other hands, does not change its SD).
 
@@ -261,50 +326,17 @@ class DisplacementSimulator:
 
             bar = tqdm(total=b, desc="SD", mininterval=5.0)
         try:
-            return self._pooled(hv, np.asarray(hand_faces), object_pose, g, iters, bar)
+            return self._workers.displacements(self.collision_obj, self.vertex_mean, self.settings, hv,
+                                               np.asarray(hand_faces), object_pose, g, iters, bar)
         finally:
             if bar is not None:
                 bar.close()
 
-    def _pooled(self, hv: np.ndarray, faces: np.ndarray, object_pose: np.ndarray | None, g: np.ndarray | None,
-                iters: np.ndarray | None, bar) -> np.ndarray:
-        """:meth:`displacements` in the worker processes: the hands in contiguous chunks (about four per
-        worker, so that a slow chunk does not hold the others up), put back in order."""
-        b = len(hv)
-        if self._pool is not None and self._pool_hands >= self.recycle_after:
-            self._pool.shutdown()  # fresh processes give back the memory PyBullet kept
-            self._pool = None
-        if self._pool is None:
-            # fork, not spawn: spawn re-runs the parent's __main__ (a Snakemake script) in each worker.
-            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("fork"))
-            self._pool_hands = 0
-        self._pool_hands += b
-        size = max(1, math.ceil(b / (4 * self.workers)))
-        starts = range(0, b, size)
-        mean = np.asarray(self.vertex_mean, dtype=np.float64)
-        futures: list[Future] = [
-            self._pool.submit(_displacement_chunk, str(self.collision_obj), mean, self.settings, hv[a:a + size], faces,
-                              object_pose, None if g is None else g[a:a + size],
-                              None if iters is None else iters[a:a + size])
-            for a in starts]
-        out = np.empty(b)
-        try:
-            for a, future in zip(starts, futures):
-                chunk = future.result()
-                out[a:a + len(chunk)] = chunk
-                if bar is not None:
-                    bar.update(len(chunk))
-        except BrokenProcessPool as exc:
-            from tohgs.sim.isolation import SimulationCrash
 
-            self._pool = None
-            raise SimulationCrash(f"an SD worker process died while simulating hands on {self.collision_obj}; "
-                                  "see the log for the native stack") from exc
-        return out
-
-
-#: Each worker process's simulators, by object and protocol (:func:`_displacement_chunk`).
+#: Each worker process's simulators, by object and protocol, the most recently used last
+#: (:func:`_displacement_chunk`).
 _WORKER_SIMULATORS: dict[tuple, DisplacementSimulator] = {}
+_WORKER_KEEP = 4  # simulators a worker keeps (a job's objects come one after another)
 
 
 def _displacement_chunk(collision_obj: str, vertex_mean: np.ndarray, settings: SDSettings, hands: np.ndarray,
@@ -317,9 +349,12 @@ def _displacement_chunk(collision_obj: str, vertex_mean: np.ndarray, settings: S
 
     faulthandler.enable()  # a native crash leaves its stack in the job's log
     key = (collision_obj, vertex_mean.tobytes(), repr(settings))
-    sim = _WORKER_SIMULATORS.get(key)
+    sim = _WORKER_SIMULATORS.pop(key, None)
     if sim is None:
-        sim = _WORKER_SIMULATORS[key] = DisplacementSimulator(collision_obj, vertex_mean, settings)
+        sim = DisplacementSimulator(collision_obj, vertex_mean, settings)
+        while len(_WORKER_SIMULATORS) >= _WORKER_KEEP:
+            _WORKER_SIMULATORS.pop(next(iter(_WORKER_SIMULATORS))).close()
+    _WORKER_SIMULATORS[key] = sim
     return np.array([sim.displacement(hands[i], faces, object_pose, None if gravity is None else gravity[i],
                                       None if iterations is None else int(iterations[i])) for i in range(len(hands))],
                     dtype=np.float64)
