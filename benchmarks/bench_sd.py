@@ -7,11 +7,12 @@ pushed 5 mm deeper towards the object (predictions sink into their objects more 
 gravity: the official code's fixed (0, 9.8, 0) and the default ``away_from_palm``; the object at a world pose.
 
 Three ways, interleaved round by round in alternating order (the machine may be shared; compare within a
-run only): ``reference`` (:meth:`DisplacementSimulator.displacement` per hand, the protocol),
-``batch_1`` (:meth:`DisplacementSimulator.displacements`, one process) and ``batch_<W>`` (``--workers``
-processes). Every round checks that all three give the same SD per grasp, bit for bit. Then a phase profile of
-the protocol's PyBullet calls (reset, the hand's BVH shape, the object's parts, the bodies, the 35 steps, and
-the steps again with 1 solver iteration) on the same grasps.
+run only): ``reference`` (:meth:`DisplacementSimulator.displacement` per hand, the protocol, in this
+process), ``batch_1`` (:meth:`DisplacementSimulator.displacements`, one worker process) and ``batch_<W>``
+(``--workers`` processes), the workers shared by all the cases as in an evaluation job. Every round checks
+that all three give the same SD per grasp, bit for bit. Then a phase profile of the protocol's PyBullet
+calls (reset, the hand's BVH shape, the object's parts, the bodies, the 35 steps, and the steps again with
+1 solver iteration) on the same grasps.
 
 Writes ``benchmarks/results/sd.json``: grasps per second and per CPU-second of each way, the ratios, the
 phase profile, the machine (CPU count, load average) and the commit.
@@ -36,7 +37,7 @@ from tohgs.assets.objects import prepare_object
 from tohgs.assets.sources import brick_candidates, pybullet_named_candidates, pybullet_random_candidates
 from tohgs.config import settings_from, validate_config
 from tohgs.geometry.grasp import pose_matrix
-from tohgs.metrics.quality import DisplacementSimulator, SDSettings, sd_gravity
+from tohgs.metrics.quality import DisplacementSimulator, SDSettings, SDWorkers, sd_gravity
 
 REPO = Path(__file__).resolve().parent.parent
 POSE = np.array([0.1, -0.2, 0.75, 0.0, 0.0, np.sin(0.4), np.cos(0.4)])  # the object's world pose
@@ -115,12 +116,18 @@ def cases(objects: dict, palm_ids: np.ndarray) -> list[dict]:
     return out
 
 
-def run_way(way: str, workers: int, case: dict, faces: np.ndarray) -> np.ndarray:
-    """SD of a case's hands one way; the simulator is made and closed inside (its start is part of the cost)."""
-    with DisplacementSimulator(case["collision"], case["centre"], case["settings"], workers=workers) as sim:
-        if way == "reference":
-            return np.array([sim.displacement(v, faces, POSE, g) for v, g in zip(case["hands"], case["g"])])
-        return sim.displacements(case["hands"], faces, POSE, case["g"])
+def run_way(way: str, workers: int, case_list: list[dict], faces: np.ndarray) -> np.ndarray:
+    """SD of all the cases' hands one way, as an evaluation job does it: a simulator per case, the batch ways'
+    worker processes shared by all of them (started and ended inside: part of the cost)."""
+    out = []
+    with SDWorkers(workers) as pool:
+        for case in case_list:
+            with DisplacementSimulator(case["collision"], case["centre"], case["settings"], workers=pool) as sim:
+                if way == "reference":
+                    out.append([sim.displacement(v, faces, POSE, g) for v, g in zip(case["hands"], case["g"])])
+                else:
+                    out.append(sim.displacements(case["hands"], faces, POSE, case["g"]))
+    return np.concatenate(out)
 
 
 def phase_profile(case_list: list[dict], faces: np.ndarray, per_case: int) -> dict[str, float]:
@@ -203,8 +210,7 @@ def main() -> None:
             order = ways if r % 2 == 0 else ways[::-1]
             for way, workers in order:
                 c0, t0 = _cpu(), time.perf_counter()
-                sds[way] = np.concatenate([run_way("reference" if way == "reference" else "batch", workers, c, faces)
-                                           for c in case_list])
+                sds[way] = run_way(way, workers, case_list, faces)
                 wall[way].append(time.perf_counter() - t0)
                 cpu[way].append(_cpu() - c0)
                 print(f"round {r}: {way}: {n} grasps in {wall[way][-1]:.1f} s ({cpu[way][-1]:.1f} CPU-s)", flush=True)
