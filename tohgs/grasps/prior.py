@@ -63,15 +63,16 @@ def object_seed(seed: int, name: str) -> int:
 
 def evaluate_grasps(hand: HandModel, pose: np.ndarray, mesh: trimesh.Trimesh, collision_obj: str | Path,
                     sd_settings: SDSettings, voxel_pitch: float = 0.001, progress: bool = False,
-                    cache_dir: str | Path | None = None) -> dict[str, np.ndarray]:
+                    cache_dir: str | Path | None = None, workers: int = 1) -> dict[str, np.ndarray]:
     """PV (m^3), SD (m) and contact distance (m) of (B, 51) grasps of one object in its mesh frame; SD's
     gravity per grasp as ``sd_settings.gravity_direction`` says (:func:`tohgs.metrics.quality.palm_gravity` by default); the
-    object's surface voxels are cached under ``cache_dir``."""
+    object's surface voxels are cached under ``cache_dir``; SD in ``workers`` processes (the same numbers
+    as one, :meth:`tohgs.metrics.quality.DisplacementSimulator.displacements`)."""
     with torch.no_grad():
         verts = hand(torch.as_tensor(pose, dtype=hand.rest_vertices.dtype)).vertices.cpu().numpy().astype(np.float64)
     faces = hand.closed_faces.cpu().numpy()
     centre = np.asarray(mesh.vertices).mean(0)
-    with DisplacementSimulator(collision_obj, centre, sd_settings) as sim:
+    with DisplacementSimulator(collision_obj, centre, sd_settings, workers=workers) as sim:
         return hand_quality(verts, faces, hand.assets.palm_ids, mesh, surface_voxels(mesh, voxel_pitch, cache_dir), sim,
                             voxel_pitch, progress=progress)
 
@@ -91,7 +92,7 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
         seed: the global seed (combined with the object's name).
         out: the raw store to write.
         cache_dir: cache root for SDF grids and surface voxels (None: no cache).
-        threads: torch threads.
+        threads: the job's cores: torch threads of the synthesis, then SD's worker processes.
     """
     torch.set_num_threads(max(1, int(threads)))
     keep_freed_memory()  # the optimiser's megabyte tensors would otherwise page-fault in every step
@@ -116,7 +117,7 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
     t0 = time.perf_counter()
     pose = result.pose.cpu().numpy()
     metrics = evaluate_grasps(hand, pose, mesh, object_dir / "collision.obj", s_sd, voxel_pitch, progress=True,
-                              cache_dir=cache_dir)
+                              cache_dir=cache_dir, workers=threads)
     timing["metrics"] = time.perf_counter() - t0
     log.info("%s: PV median %.2f cm^3, SD median %.2f cm, metrics in %.1f s", name,
              float(np.median(metrics["pv"])) * 1e6, float(np.median(metrics["sd"])) * 100, timing["metrics"])
