@@ -81,7 +81,8 @@ def test_synthesis_and_metrics_of_one_brick(tmp_path):
     cube.export(obj / "mesh.obj")
     cube.convex_hull.export(obj / "collision.obj")
     hand = load_hand("anny")
-    syn = {"batch": 6, "iterations": 30, "refine_iterations": 10, "plane_fraction": 0.5}
+    syn = {"batch": 6, "iterations": 30, "refine_iterations": 10, "plane_fraction": 0.5, "step_decay_every": 8,
+           "temperature_decay_every": 2}
     g = make_prior_grasps(obj, hand, "anny", syn, {"spacing": 0.003}, {}, 0.001, "down", 0, tmp_path / "raw.zarr",
                           cache_dir=tmp_path / "cache")
     assert len(g) == 6 and (g.plane[:3, 2] == 1).all() and (g.plane[3:] == 0).all()

@@ -50,7 +50,7 @@ def test_initial_hands_face_the_object_from_outside(setup):
 
 def test_the_optimiser_lowers_the_energy(setup):
     hand, cube, sdf = setup
-    s = SynthesisSettings(batch=8, iterations=60, refine_iterations=20)
+    s = SynthesisSettings(batch=8, iterations=60, refine_iterations=20, step_decay_every=8, temperature_decay_every=2)
     r = synthesize(hand, sdf, cube.vertices, s, seed=0)
     assert len(r.history) == 81
     assert r.history[-1] < 0.6 * r.history[0], r.history[::10]

@@ -51,7 +51,7 @@ class SynthesisSettings:
     decay intervals and the initial distance are set for CPU runs (see the config)."""
 
     batch: int = 64
-    iterations: int = 300
+    iterations: int = 600
     n_contact: int = 4
     w_dis: float = 100.0
     w_pen: float = 100.0
@@ -62,13 +62,13 @@ class SynthesisSettings:
     spen_threshold: float = 0.018
     step_size: float = 0.005
     step_decay: float = 0.95
-    step_decay_every: int = 8
+    step_decay_every: int = 16
     rmsprop_mu: float = 0.98
     switch_probability: float = 0.1
     temperature: float = 18.0
     temperature_decay: float = 0.95
-    temperature_decay_every: int = 2
-    refine_iterations: int = 200
+    temperature_decay_every: int = 4
+    refine_iterations: int = 100
     refine_lr: float = 0.001
     init_distance: tuple[float, float] = (0.01, 0.04)
     init_jitter: float = 0.1
