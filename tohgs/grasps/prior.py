@@ -66,18 +66,20 @@ def object_seed(seed: int, name: str) -> int:
 
 def evaluate_grasps(hand: HandModel, pose: np.ndarray, mesh: trimesh.Trimesh, collision_obj: str | Path,
                     sd_settings: SDSettings, voxel_pitch: float = 0.001, progress: bool = False,
-                    cache_dir: str | Path | None = None, simulate: np.ndarray | None = None) -> dict[str, np.ndarray]:
+                    cache_dir: str | Path | None = None, simulate: np.ndarray | None = None,
+                    voxels: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """PV (m^3), SD (m) and contact distance (m) of (B, 51) grasps of one object in its mesh frame; SD's
     gravity per grasp as ``sd_settings.gravity_direction`` says (:func:`tohgs.metrics.quality.palm_gravity` by default); the
     object's surface voxels are cached under ``cache_dir``.
 
     ``simulate``: (B,) bool, the grasps whose SD is simulated (None: all); the others get SD NaN. Each
     grasp's metrics are its own (one PyBullet world reset per grasp), so a grasp measures the same with or
-    without the others."""
+    without the others. ``voxels``: the object's surface voxels if already at hand (else
+    :func:`~tohgs.metrics.quality.surface_voxels`)."""
     with torch.no_grad():
         verts = hand(torch.as_tensor(pose, dtype=hand.rest_vertices.dtype)).vertices.cpu().numpy().astype(np.float64)
     faces = hand.closed_faces.cpu().numpy()
-    voxels = surface_voxels(mesh, voxel_pitch, cache_dir)
+    voxels = surface_voxels(mesh, voxel_pitch, cache_dir) if voxels is None else voxels
     sim_rows = np.ones(len(verts), dtype=bool) if simulate is None else np.asarray(simulate, dtype=bool)
     out = {"pv": np.zeros(len(verts)), "sd": np.full(len(verts), np.nan), "contact_distance": np.zeros(len(verts))}
     if sim_rows.any():
@@ -126,17 +128,20 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
     s_syn = settings_from(SynthesisSettings, {**synthesis, "plane_direction": plane_direction})
     s_sdf = settings_from(SDFSettings, sdf)
     s_sd = settings_from(SDSettings, sd)
-    timing = {}
-    t0 = time.perf_counter()
+    timing, cpu_timing = {}, {}  # seconds per phase: wall clock, and this process's CPU time
+    t0, c0 = time.perf_counter(), time.process_time()
     grid = object_sdf(mesh, s_sdf, cache_dir)
-    timing["sdf"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    timing["sdf"], cpu_timing["sdf"] = time.perf_counter() - t0, time.process_time() - c0
+    t0, c0 = time.perf_counter(), time.process_time()
     rest = rest_directions(mesh) if s_syn.plane_direction == "stable" else None
     result = synthesize(hand, grid, mesh.vertices, s_syn, object_seed(seed, name), progress=True, rest=rest)
-    timing["synthesis"] = time.perf_counter() - t0
+    timing["synthesis"], cpu_timing["synthesis"] = time.perf_counter() - t0, time.process_time() - c0
     log.info("%s: %d grasps, mean energy %.3f -> %.3f in %.1f s", name, s_syn.batch, result.history[0],
              result.history[-1], timing["synthesis"])
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
+    voxels = surface_voxels(mesh, voxel_pitch, cache_dir)
+    timing["voxels"], cpu_timing["voxels"] = time.perf_counter() - t0, time.process_time() - c0
+    t0, c0 = time.perf_counter(), time.process_time()
     pose = result.pose.cpu().numpy()
     e = result.energies
     simulate, screened = None, None
@@ -151,8 +156,8 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
         log.info("%s: %d of %d grasps pass the energy and joint-limit checks; SD simulates only those", name,
                  int(simulate.sum()), len(simulate))
     metrics = evaluate_grasps(hand, pose, mesh, object_dir / "collision.obj", s_sd, voxel_pitch, progress=True,
-                              cache_dir=cache_dir, simulate=simulate)
-    timing["metrics"] = time.perf_counter() - t0
+                              cache_dir=cache_dir, simulate=simulate, voxels=voxels)
+    timing["metrics"], cpu_timing["metrics"] = time.perf_counter() - t0, time.process_time() - c0
     sd = metrics["sd"][np.isfinite(metrics["sd"])]
     log.info("%s: PV median %.2f cm^3, SD median %.2f cm (%d simulated), metrics in %.1f s", name,
              float(np.median(metrics["pv"])) * 1e6, float(np.median(sd)) * 100 if len(sd) else float("nan"), len(sd),
@@ -161,6 +166,7 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
         object=name, pose=pose, contact_idx=result.contact_idx.cpu().numpy(), plane=result.planes.cpu().numpy(),
         energies={k: getattr(e, k).cpu().numpy() for k in ENERGY_TERMS}, **metrics,
         attrs={"hand": hand_name, "joint_limits": hand.joint_limits.cpu().numpy().tolist(), "seed": int(seed), "timing": timing,
+               "cpu_timing": cpu_timing,
                "screen": screened, "history": result.history[:: max(1, len(result.history) // 100)],
                "config": {"synthesis": asdict(s_syn), "sdf": asdict(s_sdf), "sd": asdict(s_sd), "voxel_pitch": voxel_pitch}})
     write_prior_grasps(grasps, out)
