@@ -26,6 +26,7 @@ import os
 import platform
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -164,8 +165,7 @@ def main() -> None:
     speedup = {v: round(summary[v]["accepted_per_cpu_minute"] / summary["before"]["accepted_per_cpu_minute"], 2)
                for v in variants[1:]}
     out = {"benchmark": "prior_grasps", **info, "torch_threads": 1,
-           "command": "python benchmarks/bench_prior.py " + " ".join(f"--{k} {v}" for k, v in vars(args).items()
-                                                                      if k not in ("out", "keep")),
+           "command": " ".join(["python benchmarks/bench_prior.py", *sys.argv[1:]]),
            "before": {"synthesis": BEFORE, "simulate": "all"},
            "after": {"synthesis": {k: cfg["prior_grasps"]["synthesis"][k] for k in BEFORE},
                      "simulate": cfg["prior_grasps"]["simulate"]},
