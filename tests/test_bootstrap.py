@@ -28,7 +28,9 @@ def _rows(rng: np.random.Generator, objects: int = 20, configs: int = 6, grasps:
         "sd": np.where(good, 0.01, 0.05), "contact_distance": 0.0, "init_opp": rng.uniform(0, 0.02, n),
         "goal_opp": rng.uniform(0, 0.02, n), "ds": ds, "hand_vertices": 1609, "kept": True,
         # robust SD's perturbed SDs for the first two grasps of each configuration, none for the others
-        "sd_perturbed": [list(rng.uniform(0.0, 0.04, 3)) if k < 2 else [] for k in g.ravel()]})
+        "sd_perturbed": [list(rng.uniform(0.0, 0.04, 3)) if k < 2 else [] for k in g.ravel()],
+        # SD out of the palm: about as good, NaN for every fourth grasp (a method evaluated without it)
+        "sd_palm": np.where(g.ravel() % 4 == 3, np.nan, np.where(good, 0.012, 0.03) * rng.uniform(0.5, 1.5, n))})
 
 
 def test_the_cells_of_unit_weights_are_the_tables_values():
@@ -37,7 +39,7 @@ def test_the_cells_of_unit_weights_are_the_tables_values():
     keys = config_keys(rows)
     values = cells(np.ones((1, len(keys))), config_stats(rows, keys, T.max_pv, T.max_sd))
     expect = summarize(rows, T)
-    assert set(values) >= {"qr", "ts", "sd_robust", "sd_pass", "sd_unstable"}
+    assert set(values) >= {"qr", "ts", "sd_robust", "sd_pass", "sd_unstable", "ds_per_vertex", "sd_palm_avg", "qr_palm"}
     for k, v in values.items():
         assert np.isfinite(v[0]) and v[0] == pytest.approx(expect[k], rel=1e-9, abs=1e-12), k
 
@@ -108,6 +110,38 @@ def test_claims_hold_fail_or_cannot_tell_by_their_paired_interval():
     # objects needed to tell: a claim already told needs the objects it has; an undecided one more
     assert out.loc["a", "objects"] == 6 and out.loc["a", "objects_needed"] == 6
     assert not out.loc["c", "objects_needed"] <= 6
+    # the per-object paired test against a slow reference: TS per object from the tables' summaries, then
+    # every one of the 2^6 sign patterns; good against its twin is no better than chance
+    import itertools
+
+    d = np.array([summarize(rows[(rows.method == "good") & (rows.object == o)], T)["ts"]
+                  - summarize(rows[(rows.method == "bad") & (rows.object == o)], T)["ts"] for o in sorted(rows.object.unique())])
+    flips = np.array([abs(np.dot(sg, d)) / len(d) for sg in itertools.product((1, -1), repeat=len(d))])
+    assert out.loc["a", "objects_favour"] == (d > 0).sum() >= 5
+    assert out.loc["a", "p_objects"] == pytest.approx(np.mean(flips >= abs(d.mean()) - 1e-12))
+    assert out.loc["b", "p_objects"] == out.loc["a", "p_objects"] and out.loc["b", "objects_favour"] == 6 - (d > 0).sum()
+    told = out.loc["a", "p_objects"] < 0.05
+    assert out.loc["a", "paired_verdict"] == ("holds" if told else "cannot tell")
+    assert out.loc["b", "paired_verdict"] == ("does not hold" if told else "cannot tell")
+    clear = pd.concat([_rows(np.random.default_rng(4), objects=10, method="good", mean=0.9, spread=0.03),
+                       _rows(np.random.default_rng(5), objects=10, method="bad", mean=0.2, spread=0.03)])
+    ten = claims_table(clear, {"a": claims["a"]}, tables, {}, T, BootstrapSettings(samples=100), ["placing"]).iloc[0]
+    assert ten.objects_favour == 10 and ten.p_objects == pytest.approx(2 / 1024) and ten.paired_verdict == "holds"
+    assert out.loc["c", "paired_verdict"] == "cannot tell" and out.loc["c", "p_objects"] > 0.05
+    assert out.loc["e", "paired_verdict"].startswith("not checked")
+
+
+def test_the_sign_flip_test_is_exact_for_few_objects_and_sampled_for_many():
+    from tohgs.metrics.claims import sign_flip_test
+
+    rng = np.random.default_rng(0)
+    assert sign_flip_test(np.ones(3), rng) == pytest.approx(2 / 8)  # 3 objects can never tell at 5 %
+    assert sign_flip_test(np.array([1.0, 1.0, 1.0, 1.0, 1.0, -1.0]), rng) == pytest.approx(14 / 64)
+    assert np.isnan(sign_flip_test(np.array([np.nan]), rng))
+    assert sign_flip_test(np.ones(30) + rng.normal(0, 0.1, 30), rng) < 1e-3  # 20000 random patterns
+    # under the null (differences symmetric about 0) p is about uniform: 5 % of tests below 0.05
+    ps = np.array([sign_flip_test(rng.normal(0, 1, 10), rng) for _ in range(400)])
+    assert 0.02 < (ps < 0.05).mean() < 0.09 and 0.4 < np.median(ps) < 0.6
 
 
 def test_objects_needed_follows_the_square_root_law():

@@ -52,8 +52,8 @@ def test_defaults_are_filled_in_place():
         ({"hand": {"model": "mano", "mano_path": "no/MANO_RIGHT.pkl"}}, "hand.mano_path", "does not exist"),
         ({"objects": {"size": {"longest_min": 0.2, "longest_max": 0.1}}}, "objects.size.longest_min", "larger than"),
         ({"objects": {"sources": {"dir": {"path": "no/such/folder"}}}}, "objects.sources.dir.path", "does not exist"),
-        ({"objects": {"sources": {"pybullet_data": {"random_urdfs": 0, "named": 0}, "bricks": {"count": 0}}}},
-         "objects.sources", "empty"),
+        ({"objects": {"sources": {"pybullet_data": {"random_urdfs": 0, "named": 0}, "bricks": {"count": 0},
+                                  "ycb": {"count": 0}}}}, "objects.sources", "empty"),
         ({"components": {"flow": {"kind": "flow_matcher"}}}, "components.flow.kind", "unknown component kind"),
         ({"components": {"My Net": {"kind": "grasp_diffuser"}}}, "components", "does not match"),
         ({"components": {"contact_diffuser": {"network": {"d_modle": 8}}}}, "components.contact_diffuser.network.d_modle",
@@ -140,6 +140,7 @@ def test_the_settings_dataclasses_default_to_the_schema():
     from tohgs.metrics.bootstrap import BootstrapSettings
     from tohgs.models.pose_prior import PosePriorConfig
     from tohgs.models.train import TrainSettings
+    from tohgs.assets.mesh import MeshLimits
 
     cfg = validate_config({})
     schema = load_schema()
@@ -156,7 +157,7 @@ def test_the_settings_dataclasses_default_to_the_schema():
              (GraspCVAEConfig, networks["grasp_cvae"]), (ContactNetConfig, networks["contact_net"]),
              (ContactGenConfig, networks["contact_gen"]), (SolverSettings, pred["contactgen"]),
              (FlexSettings, pred["flex"]), (PosePriorConfig, networks["pose_prior"]),
-             (BootstrapSettings, cfg["evaluation"]["bootstrap"])]
+             (BootstrapSettings, cfg["evaluation"]["bootstrap"]), (MeshLimits, cfg["objects"]["limits"])]
     for cls, block in pairs:
         for f in dataclasses.fields(cls):
             value = getattr(cls(), f.name)

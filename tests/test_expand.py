@@ -8,6 +8,7 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from tohgs.assets.bricks import make_brick
+from tohgs.assets.manifest import record_object_files
 from tohgs.assets.supports import make_table
 from tohgs.data.scenes import SceneSet
 from tohgs.geometry.grasp import pose_matrix, transform_grasp
@@ -54,6 +55,7 @@ def test_expansion_keeps_a_clear_grasp_and_drops_one_in_an_obstacle_or_the_table
     cube.apply_translation(-cube.center_mass)
     (tmp_path / "brick-cube").mkdir()
     cube.export(tmp_path / "brick-cube" / "mesh.obj")
+    record_object_files(tmp_path / "brick-cube", {"name": "brick-cube"}, ["mesh.obj"])
     supports = {"table": make_table()}
     # A hand above the cube (object frame): its lowest vertex 1 cm above the cube's top; another the
     # same but 8 cm lower (through the table once the cube rests on it).
@@ -65,6 +67,8 @@ def test_expansion_keeps_a_clear_grasp_and_drops_one_in_an_obstacle_or_the_table
     grasp[1, 2] += top - 0.08 - low[1]
     out = expand_configurations(_scene(None), grasp, hand.assets, tmp_path, supports, ExpansionSettings(0.002))
     assert out["prior_index"].tolist() == [0] and out["kept_per_config"].tolist() == [1]
+    # the scene's difficulty: the low hand is in the table at both poses
+    assert out["rejected_init"].tolist() == [1] and out["rejected_goal"].tolist() == [1]
     # An obstacle right where the kept hand is at the initial pose (the hand spans ~10 cm around the
     # wrist): now nothing is kept.
     with torch.no_grad():
@@ -77,9 +81,12 @@ def test_expansion_keeps_a_clear_grasp_and_drops_one_in_an_obstacle_or_the_table
     blocked.obstacle_pose = np.array([[*centre, 0, 0, 0, 1.0]])
     out = expand_configurations(blocked, grasp, hand.assets, tmp_path, supports, ExpansionSettings(0.002))
     assert out["kept_per_config"].tolist() == [0]
+    # the obstacle stands where the cube was picked up, not where it goes: both hands rejected there only
+    assert out["rejected_init"].tolist() == [2] and out["rejected_goal"].tolist() == [1]
     # World-frame grasps of the kept hand: at the goal, the hand moved with the cube by 0.3 m in x.
     out = expand_configurations(_scene(None), grasp, hand.assets, tmp_path, supports, ExpansionSettings(0.002))
     np.testing.assert_allclose(out["grasp_goal"][0, :3] - out["grasp_init"][0, :3], [0.3, 0, 0], atol=1e-6)
     # No accepted prior grasp: no task grasp, every configuration counted.
     none = expand_configurations(_scene(None), grasp[:0], hand.assets, tmp_path, supports, ExpansionSettings(0.002))
     assert none["grasp_init"].shape == (0, 51) and none["kept_per_config"].tolist() == [0]
+    assert none["rejected_init"].tolist() == [0] and none["rejected_goal"].tolist() == [0]

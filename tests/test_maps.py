@@ -11,6 +11,7 @@ import torch
 import trimesh
 
 from tohgs.assets.bricks import make_brick
+from tohgs.assets.manifest import record_object_files
 from tohgs.assets.supports import write_supports
 from tohgs.data.build_maps import make_map_shard, shard_items
 from tohgs.data.maps import SCHEMA_VERSION, MapDataset, read_map_shard
@@ -96,6 +97,7 @@ def built(tmp_path_factory):
     cube.apply_translation(-cube.center_mass)
     (tmp / "objects" / "brick-cube").mkdir(parents=True)
     cube.export(tmp / "objects" / "brick-cube" / "mesh.obj")
+    record_object_files(tmp / "objects" / "brick-cube", {"name": "brick-cube"}, ["mesh.obj"])
     write_supports([1.5, 1.0, 0.05], [], tmp / "objects" / "supports")
     sc = _scene(None)
     two = type(sc)(**{**sc.__dict__})
@@ -169,6 +171,27 @@ def test_same_seed_same_shard_and_broken_shards_are_refused(built):
         read_map_shard(bad)
 
 
+def test_the_so3_draw_is_uniform_and_the_z_draw_is_not():
+    """Haar-uniform rotations: the image of any fixed axis is uniform on the sphere, so its z component is
+    uniform on [-1, 1] (Archimedes) and E[R] = 0; an upright draw about z fails both."""
+    from scipy import stats
+
+    from tohgs.data.maps import random_rotation
+    from tohgs.models.train import TrainSettings
+
+    assert TrainSettings().rotation == "so3"  # the paper's protocol is the default
+    rng = np.random.default_rng(0)
+    so3 = np.stack([random_rotation(rng, "so3") for _ in range(4000)])
+    for axis in range(3):
+        cos = so3[:, 2, axis]  # the z component of the rotated axis
+        assert stats.kstest(cos, stats.uniform(loc=-1, scale=2).cdf).pvalue > 1e-3, axis
+    assert np.abs(so3.mean(0)).max() < 0.05
+    np.testing.assert_allclose(np.einsum("nij,nkj->nik", so3, so3), np.broadcast_to(np.eye(3), so3.shape), atol=1e-12)
+    upright = np.stack([random_rotation(rng, "z") for _ in range(4000)])
+    assert stats.kstest(upright[:, 2, 2], stats.uniform(loc=-1, scale=2).cdf).pvalue < 1e-6
+    assert np.abs(upright.mean(0)).max() > 0.5  # R[2, 2] is always 1
+
+
 def test_rotation_augmentation_rotates_the_hand_mesh(built):
     tmp, hand, _, _, _ = built
     plain = MapDataset([tmp / "shard-0.zarr"], per="grasp")
@@ -212,3 +235,40 @@ def test_an_official_test_store_offers_the_configurations_its_evaluation_uses():
     assert shard_items(n, "test", 3, 2, 1) == [("b", 1), ("off-a", 50), ("off-a", 70)]
     # a store too short for the official choice (none evaluated) offers all its configurations
     assert evaluation_candidates(_Store("off-c", 4, {"official": {"evaluated": []}})) == 4
+
+
+def test_a_test_split_takes_configurations_with_ground_truth_only():
+    from tohgs.data.build_maps import with_ground_truth
+
+    kept = np.array([0, 2, 0, 1])
+    assert with_ground_truth(4, kept) == [1, 3]
+    assert with_ground_truth([3, 1, 0], kept) == [3, 1]  # an official store's order is kept
+    assert shard_items({"a": with_ground_truth(4, kept), "b": 2}, "test", 1, 1, 0) == [("a", 1), ("b", 0)]
+
+
+class _Obstacles:
+    """A scene-set stand-in with one obstacle per configuration: what obstacle_gaps reads."""
+
+    def __init__(self, init, goal, obstacle):
+        self.target_init_pose, self.target_goal_pose, self._obstacle = np.asarray(init), np.asarray(goal), obstacle
+
+    def obstacles(self, c):
+        return [] if self._obstacle[c] is None else [("box", self._obstacle[c])]
+
+
+def test_obstacle_gaps_are_the_distance_from_the_target_to_its_nearest_obstacle(tmp_path):
+    """Two 4 cm cubes, faces parallel: 10 cm apart centre to centre at the initial pose (a 6 cm gap), 5 cm
+    at the goal (1 cm); no obstacle gives NaN."""
+    from tohgs.geometry.maps import sample_surface
+    from tohgs.geometry.scene import obstacle_gaps
+
+    cube = trimesh.creation.box(extents=(0.04, 0.04, 0.04))
+    (tmp_path / "box").mkdir()
+    cube.export(tmp_path / "box" / "mesh.obj")
+    record_object_files(tmp_path / "box", {"name": "box"}, ["mesh.obj"])
+    pts, _ = sample_surface(cube, 2000, np.random.default_rng(0))
+    here, there = [0, 0, 0, 0, 0, 0, 1.0], [0.05, 0, 0, 0, 0, 0, 1.0]
+    scenes = _Obstacles([here, here], [there, there], [[0.1, 0, 0, 0, 0, 0, 1.0], None])
+    gi, gg = obstacle_gaps(scenes, 0, tmp_path, pts)
+    assert gi == pytest.approx(0.06, abs=2e-4) and gg == pytest.approx(0.01, abs=2e-4)
+    assert all(np.isnan(obstacle_gaps(scenes, 1, tmp_path, pts)))

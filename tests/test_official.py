@@ -7,6 +7,7 @@ import hashlib
 import io
 import json
 import pickle
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -77,6 +78,14 @@ def test_the_workflow_reads_the_splits_and_the_hand(imported):
         read_import(copy)
     with pytest.raises(FileNotFoundError, match="python -m tohgs.data.official import"):
         read_import(copy / "nothing")
+    older = imported["out"].parent / "older-import"  # objects without the checksums of their files
+    shutil.copytree(imported["out"], older)
+    meta = json.loads((older / "objects/off-can-b/meta.json").read_text())
+    del meta["files"]
+    (older / "objects/off-can-b/meta.json").write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match=r"off-can-b/meta\.json: no checksums of the object's files \(an import by an "
+                                         r"older tohgs\): import again"):
+        read_import(older)
 
 
 def test_bad_files_are_counted_and_named(imported):
@@ -264,3 +273,158 @@ def test_round_trip(imported, hand, tmp_path, task, stem, target):
         T = pose_matrix(p_goal) @ np.linalg.inv(pose_matrix(p_init))
         np.testing.assert_allclose(back["goal_hand_vertex"][k], back["init_hand_vertex"][k] @ T[:3, :3].T + T[:3, 3],
                                    atol=2e-5)
+
+
+# --- bad input the importer reports instead of importing or crashing ----------------------------------------
+
+def _tree_copy(tree: dict, tmp_path: Path) -> Path:
+    root = tmp_path / "official"
+    shutil.copytree(tree["root"], root)
+    return root
+
+
+def _problems(report) -> dict[str, dict]:
+    return {p["path"]: p for p in report.problems}
+
+
+def test_names_that_sanitise_alike_are_a_problem_naming_both_files(tree, hand, tmp_path):
+    """``Shelf01``/``shelf01`` (shelves) and ``Box_C``/``box_c`` (objects) once merged silently (the scenes of
+    one used the other's mesh) or stopped the import; now the first in sorted order keeps the name and the
+    other is a problem naming both files, left out with the rows that use it."""
+    from synthetic_official import _write_boxes
+
+    root = _tree_copy(tree, tmp_path)
+    md, ds = root / "models", root / DS
+    _write_boxes(md / "selected_shelf/Shelf01/coacd/decomposed.obj", [((0, 0, 0.01), (0.5, 0.3, 0.02))])
+    _write_boxes(md / "meshdata/Box_C/coacd/decomposed_scaled.obj", [((0.0, 0.0, 0.0), (0.02, 0.02, 0.02))])
+    shelving = dict(tree["src"]["shelving/mug_a"], shelf_name=["Shelf01", "shelf01"])
+    np.save(ds / "shelving/mug_a.npy", shelving, allow_pickle=True)
+    can_b = dict(tree["src"]["placing/can_b"], obstacle_name=[["Box_C", "mug_a"], []])
+    np.save(ds / "placing/can_b.npy", can_b, allow_pickle=True)
+    report = import_official(root, tmp_path / "out", hand)
+    problems = _problems(report)
+    shelf = problems["models/selected_shelf/shelf01/coacd/decomposed.obj"]
+    assert shelf["kind"] == "name" and shelf["reason"] == (
+        "official shelf 'shelf01' and shelf 'Shelf01' (models/selected_shelf/Shelf01/coacd/decomposed.obj) both "
+        "become 'shelf-shelf01': 'shelf01' is left out, with the 3 rows and test configurations that use it")
+    box = problems["models/meshdata/box_c/coacd/decomposed_scaled.obj"]
+    assert box["kind"] == "name" and "'Box_C' (models/meshdata/Box_C/coacd/decomposed_scaled.obj) both become " \
+                                     "'off-box-c'" in box["reason"]
+    scenes = read_scenes(tmp_path / "out/scenes/shelving/off-mug-a.zarr")
+    assert len(scenes) == 1 and scenes.attrs["official"]["supports"] == {"shelf-shelf01": "Shelf01"}
+    supports = json.loads((tmp_path / "out/objects/supports/supports.json").read_text())["supports"]
+    assert [s["params"]["official_name"] for s in supports if s["kind"] == "shelf"] == ["Shelf01"]
+    mug = read_scenes(tmp_path / "out/scenes/placing/off-can-b.zarr")
+    assert mug.attrs["official"]["names"]["off-box-c"] == "Box_C"
+
+
+def test_a_failed_reimport_leaves_the_earlier_import_whole(tree, hand, tmp_path, monkeypatch):
+    """A re-import that fails half-way once left new objects next to old scenes and grasps; now an import is
+    written into a temporary folder and renamed into place only when complete."""
+    import tohgs.data.official as official
+
+    out = tmp_path / "out"
+    import_official(tree["root"], out, hand, ["placing"])
+    before = {p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+    calls = {"n": 0}
+    real = official._write_task
+
+    def killed(*a, **k):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise KeyboardInterrupt("killed half-way")
+        return real(*a, **k)
+
+    monkeypatch.setattr(official, "_write_task", killed)
+    with pytest.raises(KeyboardInterrupt):
+        import_official(tree["root"], out, hand, ["placing"], density=800.0)  # other masses in meta.json
+    after = {p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+    assert after == before
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]  # no temporary folder left behind
+    monkeypatch.setattr(official, "_write_task", real)
+    import_official(tree["root"], out, hand, ["placing"], density=800.0)  # a whole re-import replaces it
+    assert json.loads((out / "objects/off-can-b/meta.json").read_text())["density"] == 800.0
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine/thesis.tex").write_text("precious")
+    with pytest.raises(ValueError, match=r"mine: a non-empty folder that holds no import \(no import_report\.json\)"):
+        import_official(tree["root"], tmp_path / "mine", hand, ["placing"])
+    assert (tmp_path / "mine/thesis.tex").read_text() == "precious"
+
+
+def _nested(depth: int, leaf: list) -> list:
+    """A list nested ``depth`` times, each level 10 references to the one below: 10^depth leaves that pickle
+    into a few hundred bytes."""
+    for _ in range(depth):
+        leaf = [leaf] * 10
+    return leaf
+
+
+def test_absurd_numbers_and_shapes_are_refused_before_arrays_are_built(tree, hand, tmp_path):
+    import tracemalloc
+
+    root = _tree_copy(tree, tmp_path)
+    ds = root / DS
+    src = tree["src"]["placing/can_b"]
+    far = [np.asarray(p).tolist() for p in src["init_pose"]]
+    far[1][0] = 1e6
+    np.save(ds / "placing/can_b.npy", dict(src, init_pose=far), allow_pickle=True)
+    grasps = [g.copy() for g in tree["src"]["placing/mug_a"]["recon_param"]]
+    grasps[2][0, 1] = 1e30
+    np.save(ds / "placing/mug_a.npy", dict(tree["src"]["placing/mug_a"], recon_param=grasps), allow_pickle=True)
+    shelving = tree["src"]["shelving/mug_a"]
+    np.save(ds / "shelving/mug_a.npy", dict(shelving, recon_param=[_nested(6, [0.0] * 10)] * 2), allow_pickle=True)
+    assert (ds / "shelving/mug_a.npy").stat().st_size < 4000  # 10^7 numbers by reference
+    stacking = tree["src"]["stacking/A"]
+    pose = stacking["init"][0][1]
+    crowd = dict(tree["src"]["placing/mug_a"], obstacle_pose=[[pose] * 1000] * 3, obstacle_name=[["box_c"] * 1000] * 3)
+    np.save(ds / "placing/crowd.npy", crowd, allow_pickle=True)
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False, "shape": (10**7,)})
+    (ds / "placing/liar.npy").write_bytes(header.getvalue() + b"\0" * 8)  # declares 80 MB, holds 8 bytes
+    (ds / "placing/train.txt").write_text("mug_a.npy\ncrowd.npy\nliar.npy\n")
+    tracemalloc.start()
+    try:
+        report = import_official(root, tmp_path / "out", hand, ["placing", "shelving"])
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    problems = _problems(report)
+    assert problems[f"{DS}/placing/can_b.npy"]["reason"] == (f"init_pose[1]: position {far[1][:3]} m is beyond 10 m "
+                                                            "of the official world's origin")
+    assert problems[f"{DS}/placing/mug_a.npy"]["reason"] == (f"recon_param[2]: translation {grasps[2][0, :3].tolist()} "
+                                                            "m is beyond 10 m of the official world's origin")
+    assert problems[f"{DS}/shelving/mug_a.npy"]["reason"] == ("recon_param[0]: a list of length 10, expected numbers "
+                                                             "of shape (1, 51) or (51,)")
+    assert problems[f"{DS}/placing/crowd.npy"]["reason"] == "row 0: 1000 obstacle names and 1000 poses, more than 64 obstacles"
+    assert problems[f"{DS}/placing/liar.npy"]["reason"] == ("the .npy header declares float64 (10000000,) (80000000 "
+                                                           "bytes) but the file holds 8 bytes of data")
+    assert peak < 40e6, f"{peak / 1e6:.0f} MB traced: an array was built before its shape was checked"
+
+
+def test_a_nan_table_vertex_and_a_non_ascii_name_are_reported_not_crashes(tree, hand, tmp_path):
+    """A NaN vertex in table.obj once ended the import in ``LinAlgError: SVD did not converge`` naming no file,
+    and an official name without an ASCII letter or digit aborted it; now the first is a problem naming the
+    file (the official code's nominal table is used) and the second an object named by its CRC-32."""
+    from synthetic_official import _write_boxes
+
+    root = _tree_copy(tree, tmp_path)
+    table = root / "models/table/table.obj"
+    lines = table.read_text().splitlines()
+    first = next(k for k, line in enumerate(lines) if line.startswith("v "))
+    lines[first] = "v nan nan nan"
+    table.write_text("\n".join(lines) + "\n")
+    _write_boxes(root / "models/meshdata/日本/coacd/decomposed_scaled.obj", [((0.0, 0.0, 0.0), (0.03, 0.03, 0.03))])
+    can_b = dict(tree["src"]["placing/can_b"], obstacle_name=[["box_c", "日本"], []])
+    np.save(root / DS / "placing/can_b.npy", can_b, allow_pickle=True)
+    report = import_official(root, tmp_path / "out", hand)
+    problems = _problems(report)
+    assert problems["models/table/table.obj"]["kind"] == "mesh"
+    assert problems["models/table/table.obj"]["reason"].startswith("non-finite vertex coordinates; its top is taken at "
+                                                                  "z = 0.6 m")
+    assert report.table_top == 0.6 and report.tasks["shelving"]["configurations"] == 2
+    catalog = pd.read_csv(tmp_path / "out/objects/catalog.csv", keep_default_na=False).set_index("name")
+    name = next(n for n in catalog.index if n.startswith("off-u"))
+    assert catalog.loc[name, "status"] == "ok" and catalog.loc[name, "source_path"] == \
+        "models/meshdata/日本/coacd/decomposed_scaled.obj"
+    scenes = read_scenes(tmp_path / "out/scenes/placing/off-can-b.zarr")
+    assert scenes.attrs["official"]["names"][name] == "日本"

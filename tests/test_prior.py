@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from tohgs.assets.bricks import make_brick
+from tohgs.assets.manifest import record_object_files
 from tohgs.data.grasps import ENERGY_TERMS, PriorGrasps, read_prior_grasps, write_prior_grasps
 from tohgs.grasps.prior import filter_prior_grasps, make_prior_grasps, object_seed, summarize_prior_grasps
 from tohgs.hand import load_hand
@@ -80,6 +81,7 @@ def test_synthesis_and_metrics_of_one_brick(tmp_path):
     obj.mkdir()
     cube.export(obj / "mesh.obj")
     cube.convex_hull.export(obj / "collision.obj")
+    record_object_files(obj, {"name": "brick-cube"}, ["mesh.obj", "collision.obj"])
     hand = load_hand("anny")
     syn = {"batch": 6, "iterations": 30, "refine_iterations": 10, "plane_fraction": 0.5, "step_decay_every": 8,
            "temperature_decay_every": 2}

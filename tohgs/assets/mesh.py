@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from tohgs.assets.manifest import check_faces, check_object_file
+
 log = logging.getLogger(__name__)
 
 MESH_SUFFIXES = (".obj", ".stl", ".ply")
@@ -27,28 +29,137 @@ MESH_SUFFIXES = (".obj", ".stl", ".ply")
 # fuse into one solid. 0.2 % changes a 10 cm object by 0.1 mm.
 TOUCH_INFLATION = 1.002
 
+# A body of a multi-body source mesh that stays open after hole filling and holds less than this fraction
+# of the mesh's surface area is a stray fragment (scanned meshes such as the YCB set carry isolated single
+# triangles) and is dropped; a larger open body still rejects the mesh.
+STRAY_AREA_FRACTION = 1e-3
+
 
 OBJECT_MESH = "mesh.obj"  # the normalised mesh in an object's folder of the objects stage
+OBJECT_URDF = "object.urdf"  # its URDF (mesh.obj as visual, collision.obj as collision, the mass properties)
 
 
 def object_mesh(objects_dir: str | Path, name: str) -> trimesh.Trimesh:
     """The normalised mesh of object ``name`` of the objects stage, ``<objects_dir>/<name>/mesh.obj``
-    (metres, centre of mass at the origin), loaded as written (no merging: it would break seams).
+    (metres, centre of mass at the origin), loaded as written (no merging: it would break seams), after
+    checking the file against the checksum its stage recorded (:mod:`tohgs.assets.manifest`).
 
     Raises:
-        ValueError: the file is missing or unreadable (the message names it).
+        ValueError: the file is missing, unreadable, does not match its checksum, or loads with fewer faces
+            than recorded (the message names it).
     """
     path = Path(objects_dir) / name / OBJECT_MESH
     if not path.is_file():
         raise ValueError(f"{path}: no object mesh (is '{name}' an accepted object of the objects stage?)")
+    record = check_object_file(path)
     try:
-        return trimesh.load(path, force="mesh", process=False)
+        mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:
         raise ValueError(f"{path}: unreadable object mesh ({exc})") from exc
+    check_faces(path, len(mesh.faces), record)
+    return mesh
+
+
+COLLISION_MESH = "collision.obj"  # the convex decomposition's parts in an object's folder (one ``o`` group each)
+
+
+def collision_mesh(objects_dir: str | Path, name: str) -> trimesh.Trimesh:
+    """The convex parts of object ``name`` (``<objects_dir>/<name>/collision.obj``, its mesh frame, metres)
+    as one mesh: the parts' triangles side by side, overlaps and inner faces kept, as a decomposed mesh file
+    loads (the official evaluation voxelises this for PV).
+
+    Raises:
+        ValueError: the file is missing, unreadable, has no triangles, does not match its checksum or loads
+            with fewer faces than recorded (the message names it).
+    """
+    path = Path(objects_dir) / name / COLLISION_MESH
+    if not path.is_file():
+        raise ValueError(f"{path}: no collision parts (is '{name}' an accepted object of the objects stage?)")
+    record = check_object_file(path)
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:
+        raise ValueError(f"{path}: unreadable collision parts ({exc})") from exc
+    if len(mesh.faces) == 0:
+        raise ValueError(f"{path}: collision parts without triangles")
+    check_faces(path, len(mesh.faces), record)
+    return mesh
 
 
 class MeshError(ValueError):
     """A mesh that cannot be used; the message is the reason recorded in the catalog."""
+
+
+@dataclass(frozen=True)
+class MeshLimits:
+    """The largest source mesh the objects stage takes (config ``objects.limits``), checked before the file is
+    parsed: repairing and decomposing a mesh costs memory in proportion to its faces
+    (:func:`tohgs.assets.objects.prepare_memory_mb`), and a 10-million-face file once took 8.8 GB.
+
+    Attributes:
+        max_faces: most triangles (a polygon of k corners counts k - 2, as it is triangulated).
+        max_file_mb: largest file, MB (10^6 bytes); bounds the face count's own pass over the file.
+    """
+
+    max_faces: int = 100_000
+    max_file_mb: float = 100.0
+
+
+def count_faces(path: str | Path) -> int:
+    """The triangles of a mesh file, counted without parsing it into arrays (a pass over its lines, or the
+    header of a binary STL or a PLY): ``.obj`` ``f`` lines (k corners: k - 2 triangles), binary STL's count,
+    ASCII STL's ``facet`` lines, PLY's ``element face`` count. Memory does not grow with the file."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".obj":
+        n = 0
+        with open(path, "rb") as fh:
+            for line in fh:
+                if line[:2] in (b"f ", b"f\t"):
+                    n += max(len(line.split()) - 3, 0)
+        return n
+    if suffix == ".stl":
+        with open(path, "rb") as fh:
+            head = fh.read(84)
+        if len(head) == 84:
+            n = int.from_bytes(head[80:84], "little")
+            if 84 + 50 * n == path.stat().st_size:  # a binary STL
+                return n
+        n = 0
+        with open(path, "rb") as fh:
+            for line in fh:
+                n += line.lstrip().startswith(b"facet")
+        return n
+    if suffix == ".ply":
+        with open(path, "rb") as fh:
+            for _ in range(10_000):  # header lines
+                words = fh.readline().split()
+                if not words or words[0] == b"end_header":
+                    break
+                if words[:2] == [b"element", b"face"] and len(words) == 3 and words[2].isdigit():
+                    return int(words[2])
+        return 0
+    raise MeshError(f"{path}: unsupported suffix '{path.suffix}' (expected one of {MESH_SUFFIXES})")
+
+
+def check_mesh_limits(path: str | Path, limits: MeshLimits) -> int:
+    """Refuse a mesh file beyond ``limits`` before it is parsed; returns its face count.
+
+    Raises:
+        MeshError: the file is larger than ``max_file_mb`` or has more than ``max_faces`` triangles (the
+            reason names the file, the size and the setting).
+    """
+    path = Path(path)
+    size_mb = path.stat().st_size / 1e6
+    if size_mb > limits.max_file_mb:
+        raise MeshError(f"{path}: a file of {size_mb:.1f} MB, larger than objects.limits.max_file_mb = "
+                        f"{limits.max_file_mb:g} MB (not parsed; decimate the mesh or raise the limit)")
+    n = count_faces(path)
+    if n > limits.max_faces:
+        raise MeshError(f"{path}: {n} faces, more than objects.limits.max_faces = {limits.max_faces} (not "
+                        "parsed: repairing and decomposing it would need more memory than the rule asks for; "
+                        "decimate the mesh, or raise the limit with resources.rules.prepare_object.mem_mb)")
+    return n
 
 
 @dataclass(frozen=True)
@@ -68,17 +179,24 @@ class MassProperties:
     inertia: np.ndarray
 
 
-def load_mesh(path: str | Path) -> trimesh.Trimesh:
+def load_mesh(path: str | Path, limits: MeshLimits | None = None) -> trimesh.Trimesh:
     """Load a triangle mesh file (.obj/.stl/.ply) as one ``Trimesh`` with texture seams merged.
 
+    Args:
+        path: the file.
+        limits: the largest file and face count to parse (:func:`check_mesh_limits`, before parsing);
+            None: no limit.
+
     Raises:
-        MeshError: the file is missing, cannot be parsed, or holds no triangles.
+        MeshError: the file is missing, beyond ``limits``, cannot be parsed, or holds no triangles.
     """
     path = Path(path)
     if not path.is_file():
         raise MeshError(f"{path}: file not found")
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise MeshError(f"{path}: unsupported suffix '{path.suffix}' (expected one of {MESH_SUFFIXES})")
+    if limits is not None:
+        check_mesh_limits(path, limits)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -112,7 +230,8 @@ def repair_and_validate(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, list[st
     """Repair what can be repaired and validate the rest.
 
     Checks, in order: finite coordinates, non-empty, one solid (multi-body meshes are fused with a boolean
-    union, touching pieces included), watertight (holes filled where possible), outward winding, positive
+    union, touching pieces included; stray open fragments under :data:`STRAY_AREA_FRACTION` of the area
+    are dropped first), watertight (holes filled where possible), outward winding, positive
     volume.
 
     Args:
@@ -133,25 +252,37 @@ def repair_and_validate(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, list[st
 
     bodies = mesh.split(only_watertight=False)
     if len(bodies) > 1:
-        fixed = []
+        solids, n_stray, stray_area = [], 0, 0.0
+        total_area = float(mesh.area)
         for body in bodies:
             if not body.is_watertight:
                 trimesh.repair.fill_holes(body)
+            if not body.is_watertight and body.area < STRAY_AREA_FRACTION * total_area:
+                n_stray += 1
+                stray_area += float(body.area)
+                continue
             if not body.is_watertight:
                 raise MeshError(f"{len(bodies)} bodies, one of them not watertight; cannot fuse them")
             trimesh.repair.fix_normals(body)
-            c = body.centroid
-            body.vertices = c + (body.vertices - c) * TOUCH_INFLATION
-            fixed.append(body)
-        try:
-            mesh = trimesh.boolean.union(fixed, engine="manifold")
-        except Exception as exc:
-            raise MeshError(f"boolean union of {len(bodies)} bodies failed ({exc})") from exc
-        mesh = _clean(mesh)
-        n_parts = len(mesh.split(only_watertight=False))
-        if n_parts > 1:
-            raise MeshError(f"disconnected: {n_parts} separate parts after fusing {len(bodies)} bodies")
-        repairs.append(f"fused {len(bodies)} bodies")
+            solids.append(body)
+        if n_stray:
+            repairs.append(f"dropped {n_stray} stray open fragment{'s' if n_stray > 1 else ''} "
+                           f"({100 * stray_area / total_area:.2g} % of the area)")
+        if len(solids) == 1:
+            mesh = solids[0]
+        else:
+            for body in solids:
+                c = body.centroid
+                body.vertices = c + (body.vertices - c) * TOUCH_INFLATION
+            try:
+                mesh = trimesh.boolean.union(solids, engine="manifold")
+            except Exception as exc:
+                raise MeshError(f"boolean union of {len(solids)} bodies failed ({exc})") from exc
+            mesh = _clean(mesh)
+            n_parts = len(mesh.split(only_watertight=False))
+            if n_parts > 1:
+                raise MeshError(f"disconnected: {n_parts} separate parts after fusing {len(solids)} bodies")
+            repairs.append(f"fused {len(solids)} bodies")
 
     if not mesh.is_watertight:
         trimesh.repair.fill_holes(mesh)

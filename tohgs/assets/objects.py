@@ -8,7 +8,8 @@ Per object, :func:`prepare_object` writes ``results/objects/<name>/``:
 - ``object.urdf``: a single-link URDF with ``mesh.obj`` as visual, ``collision.obj`` as collision and the
   mass properties at the configured density.
 - ``meta.json``: the spec, status (``ok`` / ``rejected``), rejection reason, repairs, scale, extents,
-  volume, mass and inertia. A rejected object's folder holds only ``meta.json``.
+  volume, mass and inertia, and under ``files`` the SHA-256, size and face count of the three files above,
+  which every reader checks (:mod:`tohgs.assets.manifest`). A rejected object's folder holds only ``meta.json``.
 
 :func:`write_catalog` gathers every ``meta.json`` into ``catalog.csv`` and assigns the train/val/test split
 by object, per task set, deterministically for the seed.
@@ -28,12 +29,17 @@ import trimesh
 
 from tohgs.assets.bricks import make_brick
 from tohgs.assets.decomposition import DecompositionSettings, convex_decomposition
-from tohgs.assets.mesh import (OBJECT_MESH, MeshError, choose_scale, load_mesh, mass_properties, normalise,
-                               repair_and_validate)
+from tohgs.assets.manifest import record_object_files
+from tohgs.assets.mesh import (COLLISION_MESH, OBJECT_MESH, OBJECT_URDF, MeshError, MeshLimits, choose_scale,
+                               load_mesh, mass_properties, normalise, repair_and_validate)
 from tohgs.assets.sources import TASK_SET_BRICKS, TASK_SET_OBJECTS, ObjectSpec, read_object_meta
 from tohgs.io import atomic_dir, atomic_path, write_json
 
 log = logging.getLogger(__name__)
+
+#: The files of an accepted object's folder that later stages read; ``meta.json`` records their checksums
+#: (:mod:`tohgs.assets.manifest`).
+OBJECT_FILES = (OBJECT_MESH, COLLISION_MESH, OBJECT_URDF)
 
 CATALOG_COLUMNS = [
     "name", "source", "task_set", "split", "status", "reason", "scale", "extent_x", "extent_y", "extent_z",
@@ -73,8 +79,24 @@ def _urdf(name: str, mass: float, inertia: np.ndarray) -> str:
 """
 
 
-def build_object_mesh(spec: ObjectSpec, size: dict[str, float], brick_scale: float, seed: int
-                      ) -> tuple[trimesh.Trimesh, float, list[str]]:
+#: Peak memory of one ``prepare_object`` job (``/usr/bin/time -v``, default settings, CoACD on the whole
+#: mesh) on watertight tori of 20k, 100k and 200k faces: 325, 768 and 1302 MB, a line of 220 MB plus 5.4 MB
+#: per 1000 faces (the repair's adjacency caches and CoACD's input grow with the faces).
+PREPARE_BASE_MB = 220.0
+PREPARE_MB_PER_1000_FACES = 5.4
+#: Headroom over the measured line for other shapes and settings.
+PREPARE_MEMORY_MARGIN = 1.25
+
+
+def prepare_memory_mb(max_faces: int) -> int:
+    """The memory, MB, a ``prepare_object`` job may need for a mesh of ``max_faces`` faces (the measured line
+    times :data:`PREPARE_MEMORY_MARGIN`): what ``resources.rules.prepare_object.mem_mb`` must cover for the
+    limit ``objects.limits.max_faces`` (100,000 faces: 950 MB, within the default 1000)."""
+    return int(np.ceil(PREPARE_MEMORY_MARGIN * (PREPARE_BASE_MB + PREPARE_MB_PER_1000_FACES * max_faces / 1000)))
+
+
+def build_object_mesh(spec: ObjectSpec, size: dict[str, float], brick_scale: float, seed: int,
+                      limits: MeshLimits | None = None) -> tuple[trimesh.Trimesh, float, list[str]]:
     """Load (or generate), repair, validate and normalise one object.
 
     Args:
@@ -82,6 +104,7 @@ def build_object_mesh(spec: ObjectSpec, size: dict[str, float], brick_scale: flo
         size: ``objects.size`` (longest_min/max, thickness_min/max, metres) for non-brick objects.
         brick_scale: uniform scale applied to the designed bricks.
         seed: global seed (the scale draw uses :func:`object_rng`).
+        limits: the largest source file and face count, checked before the file is parsed (None: none).
 
     Returns:
         ``(mesh, scale, repairs)``: normalised mesh in metres, the scale applied to the source, repairs.
@@ -92,7 +115,7 @@ def build_object_mesh(spec: ObjectSpec, size: dict[str, float], brick_scale: flo
     if spec.source == "bricks":
         raw = make_brick(spec.brick)
     else:
-        raw = load_mesh(spec.path)
+        raw = load_mesh(spec.path, limits)
     mesh, repairs = repair_and_validate(raw)
     if spec.source == "bricks":
         scale = float(brick_scale)
@@ -107,22 +130,25 @@ def build_object_mesh(spec: ObjectSpec, size: dict[str, float], brick_scale: flo
 
 def prepare_object(spec: dict[str, Any] | ObjectSpec, out_dir: str | Path, size: dict[str, float],
                    brick_scale: float, decomposition: dict[str, Any], density: float, seed: int,
-                   cache_dir: str | Path | None) -> dict[str, Any]:
+                   cache_dir: str | Path | None, limits: dict[str, Any] | MeshLimits | None = None) -> dict[str, Any]:
     """Run the objects stage for one object and write its folder atomically.
 
     A bad mesh does not raise (whatever trimesh or the repair raise on it): the folder then holds a
-    ``meta.json`` with ``status: rejected`` and the reason, so the rest of the run proceeds.
+    ``meta.json`` with ``status: rejected`` and the reason, so the rest of the run proceeds. So does a
+    source file beyond ``limits`` (``objects.limits``; None: the defaults of :class:`MeshLimits`), refused
+    before it is parsed.
 
     Returns:
         The metadata written to ``meta.json``.
     """
     spec = spec if isinstance(spec, ObjectSpec) else ObjectSpec(**spec)
+    limits = limits if isinstance(limits, MeshLimits) else MeshLimits(**(limits or {}))
     t0 = time.perf_counter()
     meta: dict[str, Any] = {**spec.to_dict(), "status": "ok", "reason": ""}
     out_dir = Path(out_dir)
     with atomic_dir(out_dir) as tmp:
         try:
-            mesh, scale, repairs = build_object_mesh(spec, size, brick_scale, seed)
+            mesh, scale, repairs = build_object_mesh(spec, size, brick_scale, seed, limits)
         except Exception as exc:  # noqa: BLE001 - any failure on a bad file is a rejection, never a crash
             reason = str(exc) if isinstance(exc, MeshError) else f"invalid mesh ({type(exc).__name__}: {exc})"
             meta.update(status="rejected", reason=reason)
@@ -133,8 +159,8 @@ def prepare_object(spec: dict[str, Any] | ObjectSpec, out_dir: str | Path, size:
         parts, method = convex_decomposition(mesh, settings, cache_dir)
         mp = mass_properties(mesh, density)
         mesh.export(tmp / OBJECT_MESH)
-        _write_obj_parts(tmp / "collision.obj", parts)
-        (tmp / "object.urdf").write_text(_urdf(spec.name, mp.mass, mp.inertia))
+        _write_obj_parts(tmp / COLLISION_MESH, parts)
+        (tmp / OBJECT_URDF).write_text(_urdf(spec.name, mp.mass, mp.inertia))
         meta.update(
             scale=scale, extents=mesh.extents.tolist(), bounds=mesh.bounds.tolist(), volume=mp.volume,
             mass=mp.mass, density=density, inertia=mp.inertia.tolist(), watertight=bool(mesh.is_watertight),
@@ -142,7 +168,7 @@ def prepare_object(spec: dict[str, Any] | ObjectSpec, out_dir: str | Path, size:
             n_collision_parts=len(parts), decomposition=method,
             collision_volume=float(sum(p.volume for p in parts)),
         )
-        write_json(tmp / "meta.json", meta)
+        record_object_files(tmp, meta, OBJECT_FILES)  # meta.json with the files' checksums, last
     log.info("%s: %s, scale %.4g, extents %s m, %d collision parts (%s), %.2f s", spec.name, meta["status"],
              scale, np.round(meta["extents"], 4).tolist(), len(parts), method, time.perf_counter() - t0)
     return meta
@@ -205,7 +231,8 @@ def assign_splits(names: list[str], test_fraction: float, val_fraction: float, r
 
 
 def write_catalog(object_dirs: list[str | Path], split_cfg: dict[str, dict[str, float]], seed: int,
-                  out_csv: str | Path, task_sets: list[str] | None = None) -> pd.DataFrame:
+                  out_csv: str | Path, task_sets: list[str] | None = None,
+                  skipped: list[tuple[str, str]] | None = None) -> pd.DataFrame:
     """Gather the objects' ``meta.json`` into ``catalog.csv`` with the split by object.
 
     Args:
@@ -215,9 +242,12 @@ def write_catalog(object_dirs: list[str | Path], split_cfg: dict[str, dict[str, 
         out_csv: the catalog path.
         task_sets: the task sets the run's tasks use; each must keep a training and a test object after
             the rejections (None: no check).
+        skipped: ``(file, reason)`` of the user folder's entries that never became objects
+            (:func:`tohgs.assets.sources.dir_candidates`): rows of status ``skipped``, no name, the file in
+            ``source_path``.
 
     Returns:
-        The catalog (one row per selected object; rejected objects have split ``""``).
+        The catalog (one row per selected object and skipped file; rejected objects have split ``""``).
 
     Raises:
         ValueError: a task set without training or test objects (the message lists the rejections).
@@ -234,10 +264,14 @@ def write_catalog(object_dirs: list[str | Path], split_cfg: dict[str, dict[str, 
             "repairs": "; ".join(m.get("repairs", [])), "n_collision_parts": m.get("n_collision_parts", 0),
             "decomposition": m.get("decomposition", ""), "source_path": m.get("path") or "",
         })
+    for file, reason in skipped or []:
+        rows.append({"name": "", "source": "dir", "task_set": TASK_SET_OBJECTS, "split": "", "status": "skipped",
+                     "reason": reason, "n_collision_parts": 0, "watertight": False, "source_path": file})
     df = pd.DataFrame(rows, columns=CATALOG_COLUMNS)
     if task_sets:
         ok = df[df.status == "ok"]
-        rejected = "; ".join(f"{r['name']} rejected: {r['reason']}" for _, r in df[df.status != "ok"].iterrows())
+        rejected = "; ".join(f"{r['name'] or r['source_path']} {r['status']}: {r['reason']}"
+                             for _, r in df[df.status != "ok"].iterrows())
         check_split_sizes(ok.task_set.value_counts().to_dict(), split_cfg, task_sets, "accepted",
                           rejected or "no object was rejected")
     for k, (task_set, key) in enumerate([(TASK_SET_OBJECTS, "objects"), (TASK_SET_BRICKS, "bricks")]):
@@ -248,9 +282,11 @@ def write_catalog(object_dirs: list[str | Path], split_cfg: dict[str, dict[str, 
     with atomic_path(out_csv) as tmp:
         df.to_csv(tmp, index=False)
     n_ok = int((df.status == "ok").sum())
-    log.info("catalog: %d objects, %d accepted, %d rejected", len(df), n_ok, len(df) - n_ok)
+    n_skipped = int((df.status == "skipped").sum())
+    log.info("catalog: %d objects, %d accepted, %d rejected, %d files skipped", len(df) - n_skipped, n_ok,
+             len(df) - n_ok - n_skipped, n_skipped)
     for _, r in df[df.status != "ok"].iterrows():
-        log.info("rejected %s: %s", r["name"], r["reason"])
+        log.info("%s %s: %s", r["status"], r["name"] or r["source_path"], r["reason"])
     return df
 
 
@@ -266,4 +302,5 @@ def read_catalog(path: str | Path, status: str | None = "ok") -> pd.DataFrame:
         raise ValueError(f"{path}: not a tohgs catalog, missing columns {sorted(missing)}")
     df["split"] = df["split"].fillna("")
     df["reason"] = df["reason"].fillna("")
+    df["name"] = df["name"].fillna("")  # a skipped file's row has none
     return df if status is None else df[df.status == status].reset_index(drop=True)

@@ -1,8 +1,8 @@
 """Build map shards from scene stores and task grasps (the dataset stage's workhorse).
 
 The configurations of one task and split (all of them for train and validation objects, the first
-``test_configs`` of each test object: of those the official evaluation uses, for an official import's Shelving
-test store) are listed in a fixed order (object name, then configuration) and
+``test_configs`` of each test object that kept a task grasp: of those the official evaluation uses, for an
+official import's Shelving test store) are listed in a fixed order (object name, then configuration) and
 dealt round-robin to ``n_shards`` shards, so each shard is one independent job. Per configuration:
 
 - the object cloud: ``n_points`` area-weighted surface samples of the target with normals (drawn once per
@@ -77,6 +77,15 @@ def evaluation_candidates(scenes) -> int | list[int]:
     return [int(c) for c in evaluated]
 
 
+def with_ground_truth(candidates: int | Sequence[int], kept_per_config: np.ndarray) -> list[int]:
+    """The candidate configurations (a count, or indices in order: :func:`evaluation_candidates`) that kept
+    at least one task grasp. A test split takes its configurations among these, so that every row of a
+    table, the ``Dataset`` row and the ground-truth-contact rows included, serves every test configuration
+    (the official test configurations are those of its dataset, which have grasps)."""
+    order = range(candidates) if isinstance(candidates, int) else candidates
+    return [int(c) for c in order if kept_per_config[c] > 0]
+
+
 class EmptySplitError(ValueError):
     """A split that trains holds no task grasp (the message has the counts and what to change)."""
 
@@ -143,6 +152,14 @@ def make_map_shard(task: str, split: str, shard: int, n_shards: int, scene_store
     if split == "train" and scenes and not any(len(g["config"]) for g in grasps.values()):
         raise EmptySplitError(empty_split_message(task, split, grasp_attrs, grasps))
     candidates = {o: evaluation_candidates(sc) if split == "test" else len(sc) for o, sc in scenes.items()}
+    if split == "test" and not no_truth:
+        for o in sorted(candidates):
+            offered = candidates[o]
+            candidates[o] = with_ground_truth(offered, grasps[o]["kept_per_config"])
+            n = offered if isinstance(offered, int) else len(offered)
+            if len(candidates[o]) < min(n, test_configs):
+                log.warning("%s/%s %s: %d of its %d candidate configurations kept a task grasp, %d wanted", task,
+                            split, o, len(candidates[o]), n, test_configs)
     items = shard_items(candidates, split, test_configs, n_shards, shard)
     vocab = sorted(scenes)
     wrist = np.asarray(hand.rest_joints[0], dtype=np.float64)
@@ -228,10 +245,77 @@ def _size_on_disk(path: Path) -> int:
     return sum(f.stat().st_size for f in Path(path).rglob("*") if f.is_file())
 
 
+DIFFICULTY_COLUMNS = ("prior_accepted", "rejected", "rejected_init", "rejected_goal", "obstacle_configs",
+                      "gap_init_median", "gap_goal_median")
+
+
+def scene_difficulty(task_grasp_stores: list[str | Path], scene_stores: list[str | Path], objects_dir: str | Path,
+                     n_points: int = 512, seed: int = 0) -> dict[str, dict[str, float]]:
+    """How hard each task's scenes are, whatever method runs on them: per task (keys of the result)
+
+    - ``prior_accepted``: accepted prior grasps per target object (mean);
+    - ``rejected``, ``rejected_init``, ``rejected_goal``: the share of an object's accepted prior grasps the
+      scene rejects at either pose, at the initial, at the goal pose (means over configurations; the last
+      two NaN for an imported store, which does not record them);
+    - ``obstacle_configs``: the share of configurations with obstacles;
+    - ``gap_init_median``, ``gap_goal_median``: the median over those of the gap between the target and its
+      nearest obstacle at the initial / goal pose, m (:func:`tohgs.geometry.scene.obstacle_gaps`; the
+      target's surface at ``n_points`` points drawn from ``seed`` and its name).
+    """
+    from tohgs.data.scenes import read_scenes
+    from tohgs.data.task_grasps import read_task_grasps
+    from tohgs.geometry.scene import obstacle_gaps
+
+    scenes = {}
+    for p in scene_stores:
+        sc = read_scenes(p)
+        scenes[(sc.task, sc.object)] = sc
+    per_task: dict[str, dict[str, list]] = {}
+    meshes: dict[str, trimesh.Trimesh] = {}
+    for p in task_grasp_stores:
+        arrays, attrs = read_task_grasps(p)
+        task, name = attrs["task"], attrs["object"]
+        t = per_task.setdefault(task, {k: [] for k in ("accepted", "rejected", "init", "goal", "has", "gap_init", "gap_goal")})
+        accepted = int(attrs.get("n_prior_accepted", 0))
+        t["accepted"].append(accepted)
+        kept = arrays["kept_per_config"].astype(np.float64)
+        if accepted > 0:
+            t["rejected"] += (1 - kept / accepted).tolist()
+            for key, pose in (("init", "rejected_init"), ("goal", "rejected_goal")):
+                values = attrs.get(pose)
+                t[key] += (np.asarray(values, np.float64) / accepted).tolist() if values is not None else [np.nan] * len(kept)
+        sc = scenes.get((task, name))
+        if sc is None:
+            continue
+        pts, _ = _object_cloud(Path(objects_dir), name, n_points, seed)
+        for c in range(len(sc)):
+            gi, gg = obstacle_gaps(sc, c, objects_dir, pts, meshes)
+            t["has"].append(float(np.isfinite(gi)))
+            if np.isfinite(gi):
+                t["gap_init"].append(gi)
+                t["gap_goal"].append(gg)
+
+    def mean(v: list) -> float:
+        v = np.asarray(v, np.float64)
+        return float(np.nanmean(v)) if np.isfinite(v).any() else float("nan")
+
+    def median(v: list) -> float:
+        return float(np.median(v)) if v else float("nan")
+
+    return {task: {"prior_accepted": mean(t["accepted"]), "rejected": mean(t["rejected"]),
+                   "rejected_init": mean(t["init"]), "rejected_goal": mean(t["goal"]),
+                   "obstacle_configs": mean(t["has"]), "gap_init_median": median(t["gap_init"]),
+                   "gap_goal_median": median(t["gap_goal"])}
+            for task, t in sorted(per_task.items())}
+
+
 def summarize_dataset(task_grasp_stores: list[str | Path], shards: list[str | Path], out_csv: str | Path,
-                      paper_points: int = 2048, paper_scene_points: int = 6000):
+                      paper_points: int = 2048, paper_scene_points: int = 6000,
+                      scene_stores: list[str | Path] = (), objects_dir: str | Path | None = None, seed: int = 0):
     """One row per task and split (shards, configurations, grasps, bytes on disk) plus a row per task of the
-    task grasps; logs the paper-scale size estimate. Returns the table (``pandas.DataFrame``)."""
+    task grasps with its scene difficulty (:func:`scene_difficulty`, :data:`DIFFICULTY_COLUMNS`; the gaps
+    need the ``scene_stores`` and the ``objects_dir``); logs the paper-scale size estimate. Returns the
+    table (``pandas.DataFrame``)."""
     import pandas as pd
 
     from tohgs.data.maps import read_map_shard
@@ -248,10 +332,19 @@ def summarize_dataset(task_grasp_stores: list[str | Path], shards: list[str | Pa
         t["empty_configs"] += int((arrays["kept_per_config"] == 0).sum())
         t["grasps"] += len(arrays["config"])
         t["bytes"] += _size_on_disk(Path(p))
+    difficulty = scene_difficulty(task_grasp_stores, list(scene_stores) if objects_dir is not None else [],
+                                  objects_dir or ".", seed=seed)
     for task, t in sorted(per_task.items()):
-        rows.append({"task": task, "split": "task_grasps", "shards": 0, **t})
+        d = difficulty.get(task, {})
+        rows.append({"task": task, "split": "task_grasps", "shards": 0, **t, **d})
         log.info("%s: %d task grasps over %d configurations of %d objects (%d configurations kept none)", task,
                  t["grasps"], t["configs"], t["objects"], t["empty_configs"])
+        if d:
+            log.info("%s scene difficulty: the scene rejects %.1f %% of an object's %.0f accepted prior grasps at "
+                     "either pose (%.1f %% at the initial, %.1f %% at the goal pose); obstacles in %.0f %% of the "
+                     "configurations, median gap to the nearest %.1f / %.1f mm (initial / goal)", task,
+                     100 * d["rejected"], d["prior_accepted"], 100 * d["rejected_init"], 100 * d["rejected_goal"],
+                     100 * d["obstacle_configs"], 1000 * d["gap_init_median"], 1000 * d["gap_goal_median"])
     grouped: dict[tuple[str, str], dict[str, int]] = {}
     for p in shards:
         sh = read_map_shard(p)
@@ -267,7 +360,8 @@ def summarize_dataset(task_grasp_stores: list[str | Path], shards: list[str | Pa
         rows.append({"task": task, "split": split, **g})
         log.info("maps %s/%s: %d shards, %d configurations, %d grasps, %.1f MB on disk", task, split, g["shards"],
                  g["configs"], g["grasps"], g["bytes"] / 1e6)
-    df = pd.DataFrame(rows, columns=["task", "split", "shards", "objects", "configs", "empty_configs", "grasps", "bytes"])
+    df = pd.DataFrame(rows, columns=["task", "split", "shards", "objects", "configs", "empty_configs", "grasps", "bytes",
+                                     *DIFFICULTY_COLUMNS])
     with atomic_path(out_csv) as tmp:
         df.to_csv(tmp, index=False)
     # Paper scale, uncompressed: every task grasp with a 2048-point contact map and its grasp vector, and

@@ -47,9 +47,13 @@ several grasps; other rows are a configuration each. This loses nothing (each gr
 the grasps of one scene side by side.
 
 **Unreadable files** (a bad pickle, a refused pickle global, missing keys, unequal list lengths, bad
-shapes, a missing listed file, a mesh that fails validation) are counted and reported with their reasons
-(:class:`ImportReport`, ``import_report.json``), never skipped silently. Pickles are read with a restricted
-unpickler (:func:`safe_loads`): numpy arrays, numpy scalars and plain containers only.
+shapes, a position beyond :data:`POSITION_BOUND` of the origin, a missing listed file, a mesh that fails
+validation or exceeds the mesh limits, an official name that becomes the same tohgs name as another's) are
+counted and reported with their reasons (:class:`ImportReport`, ``import_report.json``), never skipped
+silently and never a crash. Pickles are read with a restricted unpickler (:func:`safe_loads`): numpy arrays,
+numpy scalars and plain containers only; an ``.npy`` header's shape and dtype are checked before its data,
+and every pose and grasp's shape before an array is built from it (a small file of shared references can
+describe gigabytes). An import is written into a temporary folder and renamed into place when complete.
 
 **The exporter** (:func:`export_official`) writes a prediction store as ``<run_dir>/<obj>.npy`` files of the
 official evaluation: a pickled dict with per grasp ``init_hand_vertex`` and ``goal_hand_vertex`` ((V, 3)
@@ -65,6 +69,9 @@ import io
 import json
 import logging
 import pickle
+import reprlib
+import unicodedata
+import zlib
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -75,8 +82,10 @@ from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
 from tohgs.assets.decomposition import DecompositionSettings, cap_hull_vertices, convex_decomposition
-from tohgs.assets.mesh import OBJECT_MESH, MeshError, load_mesh, mass_properties, repair_and_validate
-from tohgs.assets.objects import CATALOG_COLUMNS, _urdf, _write_obj_parts
+from tohgs.assets.manifest import record_object_files
+from tohgs.assets.mesh import (COLLISION_MESH, OBJECT_MESH, OBJECT_URDF, MeshError, MeshLimits, load_mesh,
+                               mass_properties, repair_and_validate)
+from tohgs.assets.objects import CATALOG_COLUMNS, OBJECT_FILES, _urdf, _write_obj_parts
 from tohgs.assets.sources import TASK_SET_BRICKS, TASK_SET_OBJECTS, sanitise
 from tohgs.assets.supports import Box, Support, make_table
 from tohgs.data.predictions import read_predictions
@@ -105,6 +114,14 @@ _SCENE_KEYS = {"placing": ("init_pose", "goal_pose", "obstacle_pose", "obstacle_
                "shelving": ("init_pose", "goal_pose", "obstacle_pose", "obstacle_name", "shelf_pose", "shelf_name"),
                "stacking": ("init", "goal")}
 _QUAT_TOL = 1e-3  # largest |norm - 1| of an official quaternion that is renormalised rather than refused
+#: The farthest an official position (a pose's or a grasp's translation) may lie from the official world's
+#: origin, m: their scenes span a 1.5 m table; 1e6 m is a damaged file, refused rather than imported.
+POSITION_BOUND = 10.0
+#: The largest magnitude of a grasp's axis-angle component, rad (two full turns): beyond it no hand pose.
+ANGLE_BOUND = 4 * np.pi
+#: The most obstacles of one official row (their scenes have a handful): a bound on what a file of shared
+#: references (a list of one pose repeated) can make the importer build.
+MAX_OBSTACLES = 64
 
 
 # --- the restricted unpickler ----------------------------------------------------------------------------
@@ -145,7 +162,10 @@ def load_official_npy(data: bytes, source: str = "npy") -> Any:
     """The object stored in an official ``.npy`` (``np.save`` of a dict) or a plain pickle file, read safely.
 
     An ``.npy`` of an object array is its header and a pickle of the array: the header is parsed by numpy,
-    the pickle by :func:`safe_loads`; a 0-d object array gives its item (the dict).
+    the pickle by :func:`safe_loads`; a 0-d object array gives its item (the dict). The header's shape and
+    dtype are checked before the data is read: an object array must be 0-d (what ``np.save`` of a dict
+    writes), another array must hold exactly the bytes its header declares (numpy would allocate the
+    declared size first).
 
     Raises:
         ValueError: unreadable or refused (the message names ``source``).
@@ -158,12 +178,20 @@ def load_official_npy(data: bytes, source: str = "npy") -> Any:
         read_header = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}
         if version not in read_header:
             raise ValueError(f"unsupported .npy version {version}")
-        _, _, dtype = read_header[version](fh)
+        shape, _, dtype = read_header[version](fh)
     except Exception as exc:
         raise ValueError(f"{source}: not a readable .npy header ({exc})") from exc
     if not dtype.hasobject:
+        body = len(data) - fh.tell()
+        declared = int(np.prod(shape, dtype=object)) * dtype.itemsize
+        if declared != body:
+            raise ValueError(f"{source}: the .npy header declares {dtype} {shape} ({declared} bytes) but the file "
+                             f"holds {body} bytes of data")
         fh.seek(0)
         return np.lib.format.read_array(fh, allow_pickle=False)
+    if shape != ():
+        raise ValueError(f"{source}: an object array of shape {shape}, expected a 0-d one holding a dict (what "
+                         "np.save of the official dict writes); not unpickled")
     arr = safe_loads(fh.read(), source)
     if not isinstance(arr, np.ndarray):
         raise ValueError(f"{source}: the .npy body is a {type(arr).__name__}, expected an object array")
@@ -172,16 +200,49 @@ def load_official_npy(data: bytes, source: str = "npy") -> Any:
 
 # --- frames --------------------------------------------------------------------------------------------
 
+def _fits(v: Any, shape: tuple[int, ...]) -> bool:
+    """Whether ``v`` (nested lists, tuples, numpy arrays, numbers) has ``shape`` with real numbers at the
+    leaves, decided without building an array: at most ``prod(shape)`` leaves are visited, so a structure of
+    shared references that would expand into gigabytes is refused at its first wrong length."""
+    if isinstance(v, np.ndarray) and v.dtype != object:
+        return v.shape == shape and v.dtype.kind in "iuf"
+    if not shape:
+        return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+    if isinstance(v, np.ndarray):
+        if v.ndim == 0 or len(v) != shape[0]:
+            return False
+    elif not isinstance(v, (list, tuple)) or len(v) != shape[0]:
+        return False
+    return all(_fits(x, shape[1:]) for x in v)
+
+
+def _describe(v: Any) -> str:
+    """A short description of a value for a message (type and length or shape, never its whole repr)."""
+    if isinstance(v, np.ndarray):
+        return f"an array of shape {v.shape} ({v.dtype})"
+    if isinstance(v, (list, tuple)):
+        return f"a {type(v).__name__} of length {len(v)}"
+    return f"{type(v).__name__} {reprlib.repr(v)}"
+
+
+def _numbers(v: Any, shapes: tuple[tuple[int, ...], ...], what: str) -> np.ndarray:
+    """``v`` as a finite float64 array of the first of ``shapes`` it has (checked before it is built)."""
+    for shape in shapes:
+        if _fits(v, shape):
+            a = np.asarray(v, dtype=np.float64).reshape(shape)
+            if not np.isfinite(a).all():
+                raise ValueError(f"{what}: non-finite numbers")
+            return a
+    raise ValueError(f"{what}: {_describe(v)}, expected numbers of shape {' or '.join(map(str, shapes))}")
+
+
 def _unit_pose(pose: Any, what: str) -> np.ndarray:
-    """A ``[x, y, z, qx, qy, qz, qw]`` pose as float64 (7,) with its quaternion renormalised."""
-    try:
-        p = np.asarray(pose, dtype=np.float64)
-    except Exception as exc:
-        raise ValueError(f"{what}: not a pose of 7 numbers ({exc})") from exc
-    if p.shape != (7,):
-        raise ValueError(f"{what}: shape {p.shape}, expected (7,) (xyz + xyzw quaternion)")
-    if not np.isfinite(p).all():
-        raise ValueError(f"{what}: non-finite numbers")
+    """A ``[x, y, z, qx, qy, qz, qw]`` pose as float64 (7,) with its quaternion renormalised; a position
+    beyond :data:`POSITION_BOUND` is refused."""
+    p = _numbers(pose, ((7,),), f"{what} (xyz + xyzw quaternion)")
+    if np.abs(p[:3]).max() > POSITION_BOUND:
+        raise ValueError(f"{what}: position {reprlib.repr(p[:3].tolist())} m is beyond {POSITION_BOUND:g} m of the "
+                         "official world's origin")
     n = np.linalg.norm(p[3:])
     if abs(n - 1.0) > _QUAT_TOL:
         raise ValueError(f"{what}: quaternion of norm {n:.6g}, not a rotation")
@@ -251,8 +312,10 @@ class ImportReport:
         root, out: the official tree and the output folder.
         table_top: height of the official table's top, m (the z shift of every pose).
         files_read: files read (each has a line in ``checksums.sha256``).
-        problems: per unreadable or missing file ``{"path", "kind", "reason"}``; ``kind`` is ``unreadable``,
-            ``missing`` or ``mesh`` (a mesh that failed validation).
+        problems: per unreadable or missing file ``{"path", "kind", "reason"}``; ``kind`` is ``unreadable``
+            (also absurd numbers: a position beyond :data:`POSITION_BOUND`, a wrong shape), ``missing``,
+            ``mesh`` (a mesh that failed validation) or ``name`` (an official name that becomes the same tohgs
+            name as another's; both files named).
         notes: what was read differently from the lists, or not at all (unlisted files), for the record.
         tasks: per task ``files``, ``rows`` (grasps), ``configurations``, ``test_files``,
             ``test_configurations``, ``targets``.
@@ -320,9 +383,10 @@ def _name(v: Any, what: str) -> str:
     if isinstance(v, bytes):
         v = v.decode("utf-8", "replace")
     if not isinstance(v, str) or not v:
-        raise ValueError(f"{what}: expected a name, got {type(v).__name__} {v!r:.40}")
-    if "/" in v or "\\" in v or v in (".", ".."):
-        raise ValueError(f"{what}: '{v}' is not a file name (names become paths below the root)")
+        raise ValueError(f"{what}: expected a name, got {_describe(v)}")
+    if ("/" in v or "\\" in v or v in (".", "..") or len(v) > 255
+            or any(unicodedata.category(c) in ("Cc", "Cs") for c in v)):
+        raise ValueError(f"{what}: {reprlib.repr(v)} is not a file name (names become paths below the root)")
     return str(v)
 
 
@@ -335,15 +399,16 @@ def _as_list(v: Any, what: str) -> list:
 
 
 def _grasp51(v: Any, what: str) -> np.ndarray:
-    try:
-        g = np.asarray(v, dtype=np.float64)
-    except Exception as exc:
-        raise ValueError(f"{what}: not 51 numbers ({exc})") from exc
-    if g.shape not in ((GRASP_DIM,), (1, GRASP_DIM)):
-        raise ValueError(f"{what}: shape {g.shape}, expected (1, {GRASP_DIM})")
-    if not np.isfinite(g).all():
-        raise ValueError(f"{what}: non-finite numbers")
-    return g.reshape(GRASP_DIM)
+    """A (1, 51) or (51,) official grasp as float64 (51,); a translation beyond :data:`POSITION_BOUND` or an
+    axis-angle component beyond :data:`ANGLE_BOUND` is refused."""
+    g = _numbers(v, ((1, GRASP_DIM), (GRASP_DIM,)), what).reshape(GRASP_DIM)
+    if np.abs(g[:3]).max() > POSITION_BOUND:
+        raise ValueError(f"{what}: translation {reprlib.repr(g[:3].tolist())} m is beyond {POSITION_BOUND:g} m of "
+                         "the official world's origin")
+    if np.abs(g[3:]).max() > ANGLE_BOUND:
+        raise ValueError(f"{what}: an axis-angle component of {np.abs(g[3:]).max():.3g} rad, beyond "
+                         f"{ANGLE_BOUND:.3g} (two turns)")
+    return g
 
 
 def _stack_entry(v: Any, what: str) -> tuple[str, np.ndarray, str, np.ndarray]:
@@ -401,6 +466,9 @@ def _parse_rows(task: str, data: Any, stem: str, test: bool) -> list[_Row]:
             continue
         names = _as_list(cols["obstacle_name"][i], f"obstacle_name[{i}]")
         poses = _as_list(cols["obstacle_pose"][i], f"obstacle_pose[{i}]")
+        if max(len(names), len(poses)) > MAX_OBSTACLES:
+            raise ValueError(f"row {i}: {len(names)} obstacle names and {len(poses)} poses, more than "
+                             f"{MAX_OBSTACLES} obstacles")
         if len(names) != len(poses):
             raise ValueError(f"row {i}: {len(names)} obstacle names but {len(poses)} obstacle poses")
         obstacles = [(_name(n, f"obstacle_name[{i}][{j}]"), _unit_pose(p, f"obstacle_pose[{i}][{j}]"))
@@ -417,9 +485,28 @@ def _parse_rows(task: str, data: Any, stem: str, test: bool) -> list[_Row]:
 
 # --- objects and supports --------------------------------------------------------------------------------
 
+def _sanitised(official: str) -> str:
+    """An official name in the wildcard alphabet (:func:`tohgs.assets.sources.sanitise`); a name with no letter
+    or digit of it (``日本``) becomes ``u<CRC-32 of its UTF-8>``, as a user folder's file does."""
+    try:
+        return sanitise(official)
+    except ValueError:
+        return f"u{zlib.crc32(official.encode('utf-8', 'surrogateescape')):08x}"
+
+
 def object_name(official: str, brick: bool) -> str:
     """tohgs's name of an official object: ``off-<name>``, or ``off-brick-<name>`` for a brick."""
-    return f"off-brick-{sanitise(official)}" if brick else f"off-{sanitise(official)}"
+    return f"off-brick-{_sanitised(official)}" if brick else f"off-{_sanitised(official)}"
+
+
+def shelf_name(official: str) -> str:
+    """tohgs's support name of an official shelf: ``shelf-<name>``."""
+    return f"shelf-{_sanitised(official)}"
+
+
+def shelf_path(official: str) -> str:
+    """The official mesh of a shelf, relative to the tree's root."""
+    return f"models/selected_shelf/{official}/coacd/decomposed.obj"
 
 
 def mesh_path(official: str, brick: bool) -> str:
@@ -430,7 +517,8 @@ def mesh_path(official: str, brick: bool) -> str:
 
 
 def _import_object(reader: _Reader, official: str, brick: bool, out_dir: Path, density: float,
-                   decomposition: DecompositionSettings, cache_dir: str | Path | None) -> dict[str, Any]:
+                   decomposition: DecompositionSettings, cache_dir: str | Path | None,
+                   limits: MeshLimits | None = None) -> dict[str, Any]:
     """Write one object's folder as the objects stage does (:func:`tohgs.assets.objects.prepare_object`),
     from the official mesh at scale 1 (it is in metres).
 
@@ -449,7 +537,7 @@ def _import_object(reader: _Reader, official: str, brick: bool, out_dir: Path, d
         try:
             if not reader.exists(rel):
                 raise MeshError(f"{rel}: file not found")
-            raw = load_mesh(reader.hash(rel))
+            raw = load_mesh(reader.hash(rel), limits)
             mesh, repairs = repair_and_validate(raw)
             centre = np.asarray(mesh.center_mass, dtype=np.float64)
             mesh.apply_translation(-centre)
@@ -468,51 +556,66 @@ def _import_object(reader: _Reader, official: str, brick: bool, out_dir: Path, d
             return meta
         mp = mass_properties(mesh, density)
         mesh.export(tmp / OBJECT_MESH)
-        _write_obj_parts(tmp / "collision.obj", parts)
-        (tmp / "object.urdf").write_text(_urdf(name, mp.mass, mp.inertia))
+        _write_obj_parts(tmp / COLLISION_MESH, parts)
+        (tmp / OBJECT_URDF).write_text(_urdf(name, mp.mass, mp.inertia))
         meta.update(
             official_offset=centre.tolist(), scale=1.0, extents=mesh.extents.tolist(), bounds=mesh.bounds.tolist(),
             volume=mp.volume, mass=mp.mass, density=density, inertia=mp.inertia.tolist(),
             watertight=bool(mesh.is_watertight), repairs=repairs, n_vertices=len(mesh.vertices),
             n_faces=len(mesh.faces), n_collision_parts=len(parts), decomposition=method,
             collision_volume=float(sum(p.volume for p in parts)))
-        write_json(tmp / "meta.json", meta)
+        record_object_files(tmp, meta, OBJECT_FILES)  # meta.json with the files' checksums, last
     return meta
 
 
-def _table(reader: _Reader, report: ImportReport) -> tuple[float, tuple[float, float, float]]:
-    """The official table's top height and size, m, from ``table.obj`` as their code places it."""
+def _table(reader: _Reader, report: ImportReport, limits: MeshLimits | None = None
+           ) -> tuple[float, tuple[float, float, float]]:
+    """The official table's top height and size, m, from ``table.obj`` as their code places it; a missing,
+    unreadable or absurd table (non-finite vertices, beyond :data:`POSITION_BOUND`) is a reported problem
+    and the official code's nominal table is used."""
     rel = "models/table/table.obj"
     if not reader.exists(rel):
         report.problem(rel, "missing", f"no table mesh: its top is taken at z = {TABLE_HEIGHT} m, its size "
                                        f"{TABLE_SCALE} m")
         return TABLE_HEIGHT, TABLE_SCALE
     try:
-        v = load_mesh(reader.hash(rel)).vertices * np.asarray(TABLE_SCALE)
-    except MeshError as exc:
-        report.problem(rel, "mesh", f"{exc}; its top is taken at z = {TABLE_HEIGHT} m")
+        v = load_mesh(reader.hash(rel), limits).vertices * np.asarray(TABLE_SCALE)
+        if not np.isfinite(v).all():
+            raise MeshError(f"{rel}: non-finite vertex coordinates")
+        top, size = float(TABLE_HEIGHT + v[:, 2].max()), tuple(float(x) for x in v.max(0) - v.min(0))
+        if not (abs(top) <= POSITION_BOUND and all(0 < x <= 2 * POSITION_BOUND for x in size)):
+            raise MeshError(f"{rel}: a table of size {reprlib.repr(size)} m with its top at {top:.3g} m")
+    except Exception as exc:  # noqa: BLE001 - a bad table is a reported problem, never a crash
+        reason = str(exc) if isinstance(exc, MeshError) else f"invalid mesh ({type(exc).__name__}: {exc})"
+        report.problem(rel, "mesh", f"{reason.removeprefix(rel + ': ')}; its top is taken at z = {TABLE_HEIGHT} m, "
+                                    f"its size {TABLE_SCALE} m")
         return TABLE_HEIGHT, TABLE_SCALE
-    return float(TABLE_HEIGHT + v[:, 2].max()), tuple(float(x) for x in v.max(0) - v.min(0))
+    return top, size
 
 
-def _shelf_support(reader: _Reader, official: str, report: ImportReport) -> Support | None:
+def _shelf_support(reader: _Reader, official: str, report: ImportReport, limits: MeshLimits | None = None
+                   ) -> Support | None:
     """An official shelf as a tohgs :class:`~tohgs.assets.supports.Support`: one box per convex part (its
     bounding box in the shelf's frame: exact for axis-aligned boards and panels; ``params.box_fill`` is the
     parts' volume over the boxes'). No placement surfaces: imported scenes are not generated."""
-    rel = f"models/selected_shelf/{official}/coacd/decomposed.obj"
+    rel = shelf_path(official)
     if not reader.exists(rel):
         report.problem(rel, "missing", f"no mesh for shelf '{official}'")
         return None
     try:
-        parts = load_mesh(reader.hash(rel)).split(only_watertight=False)
-    except MeshError as exc:
-        report.problem(rel, "mesh", str(exc))
+        mesh = load_mesh(reader.hash(rel), limits)
+        if not np.isfinite(mesh.vertices).all() or np.abs(mesh.vertices).max() > POSITION_BOUND:
+            raise MeshError(f"{rel}: non-finite vertex coordinates, or beyond {POSITION_BOUND:g} m")
+        parts = mesh.split(only_watertight=False)
+        boxes = [Box(tuple(float(x) for x in p.bounds.mean(0)), tuple(float(x) for x in np.ptp(p.bounds, 0) / 2))
+                 for p in parts]
+        box_volume = sum(8 * float(np.prod(b.half_extents)) for b in boxes)
+        fill = float(sum(abs(p.convex_hull.volume) for p in parts) / box_volume) if box_volume > 0 else 0.0
+    except Exception as exc:  # noqa: BLE001 - a bad shelf is a reported problem, never a crash
+        reason = str(exc) if isinstance(exc, MeshError) else f"invalid mesh ({type(exc).__name__}: {exc})"
+        report.problem(rel, "mesh", reason.removeprefix(rel + ": "))
         return None
-    boxes = [Box(tuple(float(x) for x in p.bounds.mean(0)), tuple(float(x) for x in np.ptp(p.bounds, 0) / 2))
-             for p in parts]
-    box_volume = sum(8 * float(np.prod(b.half_extents)) for b in boxes)
-    fill = float(sum(abs(p.convex_hull.volume) for p in parts) / box_volume) if box_volume > 0 else 0.0
-    return Support(f"shelf-{sanitise(official)}", "shelf", boxes, [],
+    return Support(shelf_name(official), "shelf", boxes, [],
                    {"official_name": official, "source": rel, "box_fill": fill})
 
 
@@ -530,7 +633,10 @@ def _task_files(reader: _Reader, task: str, report: ImportReport) -> dict[str, s
     for split in ("train", "val"):
         rel = f"{base}/{split}.txt"
         if reader.exists(rel):
-            lists[split] = [Path(n).stem for n in _read_list(reader, rel)]
+            try:
+                lists[split] = [Path(n).stem for n in _read_list(reader, rel)]
+            except (OSError, UnicodeDecodeError) as exc:
+                report.problem(rel, "unreadable", f"{exc}: the task's {split} objects are not imported")
         elif task != "stacking":
             report.problem(rel, "missing", f"no {split} list: the task's {split} objects are not imported")
     if task == "stacking":
@@ -595,7 +701,7 @@ def _scene_set(task: str, target: str, rows: list[_Row], frame: _Frame, file: st
     ours = {n: object_name(n, brick) for r in firsts
             for n in [r.target, *(o for o, _ in r.obstacles), *([r.base[0]] if r.base else [])]}
     objects = sorted(set(ours.values()))
-    supports = sorted({f"shelf-{sanitise(r.shelf[0])}" if r.shelf else "table" for r in firsts})
+    supports = sorted({shelf_name(r.shelf[0]) if r.shelf else "table" for r in firsts})
 
     def conv(name: str, pose: np.ndarray) -> np.ndarray:
         return from_official_pose(pose, frame.offsets.get(ours[name], [0.0, 0.0, 0.0]), frame.table_top)
@@ -610,7 +716,7 @@ def _scene_set(task: str, target: str, rows: list[_Row], frame: _Frame, file: st
         task=task, object=object_name(target, brick),
         target_init_pose=np.array([conv(r.target, r.init) for r in firsts]).reshape(-1, 7),
         target_goal_pose=np.array([conv(r.target, r.goal) for r in firsts]).reshape(-1, 7),
-        support_id=np.array([supports.index(f"shelf-{sanitise(r.shelf[0])}" if r.shelf else "table") for r in firsts],
+        support_id=np.array([supports.index(shelf_name(r.shelf[0]) if r.shelf else "table") for r in firsts],
                             dtype=np.int32),
         support_pose=np.array([from_official_pose(r.shelf[1], None, frame.table_top) if r.shelf else identity
                                for r in firsts]).reshape(-1, 7),
@@ -665,8 +771,13 @@ def _write_catalog(metas: list[dict[str, Any]], split: dict[str, str], path: Pat
 
 def import_official(root: str | Path, out: str | Path, hand: HandAssets, tasks: Iterable[str] = TASKS,
                     density: float = 500.0, decomposition: DecompositionSettings | None = None,
-                    cache_dir: str | Path | None = None) -> ImportReport:
+                    cache_dir: str | Path | None = None, limits: MeshLimits | None = None) -> ImportReport:
     """Import the official TOHGS dataset below ``root`` into tohgs's stores below ``out``.
+
+    The import is written into a temporary folder next to ``out`` and renamed into place only when it is
+    complete, so a failed or killed import leaves ``out`` as it was (never new objects next to old scenes).
+    ``out`` must be new, empty, or an earlier import (it holds ``import_report.json``), which the new one
+    replaces whole.
 
     Args:
         root: the official tree (``models/``, ``task_oriented_grasps_dataset/``).
@@ -677,24 +788,93 @@ def import_official(root: str | Path, out: str | Path, hand: HandAssets, tasks: 
         density: objects' density, kg/m^3 (``objects.density``).
         decomposition: CoACD settings for one-body meshes (the bricks), and the vertex cap of every part.
         cache_dir: CoACD cache root (None: no cache).
+        limits: the largest mesh file and face count to parse (None: :class:`MeshLimits`' defaults).
 
     Returns:
         The report, also written to ``<out>/import_report.json``; ``<out>/checksums.sha256`` lists every
-        file read.
+        file read. Every file that cannot be used (unreadable, absurd numbers, a name that becomes the same
+        tohgs name as another's, a mesh that fails) is a problem of the report naming it, never a crash.
 
     Raises:
         FileNotFoundError: ``root`` has no ``task_oriented_grasps_dataset`` folder.
-        ValueError: an unknown task, or two official names that become the same tohgs name.
+        ValueError: an unknown task, or ``out`` is a file or a non-empty folder that holds no import.
     """
-    root, out = Path(root), Path(out)
+    root, final = Path(root), Path(out)
     if not (root / DATASET_DIR).is_dir():
         raise FileNotFoundError(f"{root}: no '{DATASET_DIR}' folder (not the official TOHGS dataset's root)")
     bad = [t for t in tasks if t not in TASKS]
     if bad:
         raise ValueError(f"unknown tasks {bad} (expected some of {list(TASKS)})")
-    decomposition = decomposition or DecompositionSettings()
-    reader, report = _Reader(root), ImportReport(str(root), str(out), hand=hand.name)
-    table_top, table_size = _table(reader, report)
+    if final.exists() and not final.is_dir():
+        raise ValueError(f"{final}: not a folder; give the import a new or empty folder")
+    if final.is_dir() and any(final.iterdir()) and not (final / "import_report.json").is_file():
+        raise ValueError(f"{final}: a non-empty folder that holds no import (no import_report.json); an import "
+                         "replaces its output folder whole, so give it a new or empty folder")
+    with atomic_dir(final) as tmp:
+        report = _import(root, tmp, final, hand, list(tasks), density, decomposition or DecompositionSettings(),
+                         cache_dir, limits or MeshLimits())
+    log.info("official import into %s: %d files read, %d problems, %s", final, report.files_read, report.n_problems,
+             report.tasks)
+    return report
+
+
+def _row_names(r: _Row, task: str) -> list[tuple[str, str]]:
+    """The ``(kind, official name)`` of the objects (``object`` or ``brick``) and the shelf a row uses."""
+    kind = "brick" if task == "stacking" else "object"
+    names = [(kind, n) for n in [r.target, *(o for o, _ in r.obstacles), *([r.base[0]] if r.base else [])]]
+    return names + ([("shelf", r.shelf[0])] if r.shelf else [])
+
+
+def _tohgs_name(key: tuple[str, str]) -> str:
+    """tohgs's name of an official ``(kind, name)``: an object's, a brick's or a shelf's (support) name."""
+    kind, official = key
+    return shelf_name(official) if kind == "shelf" else object_name(official, kind == "brick")
+
+
+def _official_path(key: tuple[str, str]) -> str:
+    """The official mesh of ``(kind, name)``, relative to the tree's root."""
+    kind, official = key
+    return shelf_path(official) if kind == "shelf" else mesh_path(official, kind == "brick")
+
+
+def _name_clashes(loaded: list[tuple[str, str, str, list[_Row], bool]], report: ImportReport
+                  ) -> list[tuple[str, str, str, list[_Row], bool]]:
+    """Official names (objects, bricks, shelves) that become the same tohgs name (``Shelf_01``, ``shelf-01``):
+    in sorted order the first keeps the name; each later one is a problem naming both files and is left out,
+    with every row and test configuration that uses it. Returns ``loaded`` without those rows."""
+    first: dict[str, tuple[str, str]] = {}
+    clash: dict[tuple[str, str], tuple[str, str]] = {}  # left out -> the one that keeps the name
+    for key in sorted({k for task, _, _, rows, _ in loaded for r in rows for k in _row_names(r, task)}):
+        kept = first.setdefault(_tohgs_name(key), key)
+        if kept != key:
+            clash[key] = kept
+    if not clash:
+        return loaded
+    dropped: dict[tuple[str, str], int] = dict.fromkeys(clash, 0)
+    out = []
+    for task, rel, split, rows, test in loaded:
+        keep = []
+        for r in rows:
+            used = [k for k in _row_names(r, task) if k in clash]
+            for k in used:
+                dropped[k] += 1
+            if not used:
+                keep.append(r)
+        if keep:
+            out.append((task, rel, split, keep, test))
+    for key, kept in sorted(clash.items()):
+        report.problem(_official_path(key), "name",
+                       f"official {key[0]} {key[1]!r} and {kept[0]} {kept[1]!r} ({_official_path(kept)}) both become "
+                       f"'{_tohgs_name(key)}': {key[1]!r} is left out, with the {dropped[key]} rows and test "
+                       "configurations that use it")
+    return out
+
+
+def _import(root: Path, out: Path, final: Path, hand: HandAssets, tasks: list[str], density: float,
+            decomposition: DecompositionSettings, cache_dir: str | Path | None, limits: MeshLimits) -> ImportReport:
+    """The import of :func:`import_official`, written below ``out`` (a temporary folder that becomes ``final``)."""
+    reader, report = _Reader(root), ImportReport(str(root), str(final), hand=hand.name)
+    table_top, table_size = _table(reader, report, limits)
     report.table_top = table_top
     frame = _Frame(table_top)
     wrist = np.asarray(hand.rest_joints[0], dtype=np.float64)
@@ -718,6 +898,7 @@ def import_official(root: str | Path, out: str | Path, hand: HandAssets, tasks: 
                 if rows is not None:
                     loaded.append((task, rel, split, rows, True))
                     stats["test_files"] += 1
+    loaded = _name_clashes(loaded, report)
 
     # 2. Objects, supports and the catalog.
     wanted: dict[str, tuple[str, bool]] = {}  # tohgs name -> (official name, brick)
@@ -725,17 +906,15 @@ def import_official(root: str | Path, out: str | Path, hand: HandAssets, tasks: 
     split_of: dict[str, str] = {}
     for task, _, split, rows, _ in loaded:
         for r in rows:
-            names = [r.target, *(o for o, _ in r.obstacles), *([r.base[0]] if r.base else [])]
-            for n in names:
-                ours = object_name(n, task == "stacking")
-                if wanted.setdefault(ours, (n, task == "stacking")) != (n, task == "stacking"):
-                    raise ValueError(f"official objects '{wanted[ours][0]}' and '{n}' both become '{ours}'")
+            for kind, n in _row_names(r, task):
+                if kind == "shelf":
+                    shelves.add(n)
+                else:
+                    wanted[object_name(n, kind == "brick")] = (n, kind == "brick")
             split_of.setdefault(object_name(r.target, task == "stacking"), SPLIT_OF[split])
-            if r.shelf:
-                shelves.add(r.shelf[0])
     metas = []
     for ours, (official, brick) in tqdm(sorted(wanted.items()), desc="objects", mininterval=5.0):
-        meta = _import_object(reader, official, brick, out / "objects", density, decomposition, cache_dir)
+        meta = _import_object(reader, official, brick, out / "objects", density, decomposition, cache_dir, limits)
         metas.append(meta)
         frame.names[ours] = official
         if meta["status"] == "ok":
@@ -747,8 +926,8 @@ def import_official(root: str | Path, out: str | Path, hand: HandAssets, tasks: 
     _write_catalog(metas, split_of, out / "objects" / "catalog.csv")
     supports = [make_table(table_size)]
     for official in sorted(shelves):
-        frame.supports[f"shelf-{sanitise(official)}"] = official
-        s = _shelf_support(reader, official, report)
+        frame.supports[shelf_name(official)] = official
+        s = _shelf_support(reader, official, report, limits)
         supports += [s] if s is not None else []
     with atomic_dir(out / "objects" / "supports") as tmp:
         for s in supports:
@@ -766,23 +945,28 @@ def import_official(root: str | Path, out: str | Path, hand: HandAssets, tasks: 
         stats = report.tasks[task]
         for target in sorted({r.target for r in rows}):
             mine = [r for r in rows if r.target == target]
-            if test:  # a test configuration is one JSON entry, never merged with another
-                path = out / "test_scenes" / task / f"{object_name(target, task == 'stacking')}.zarr"
-                if path in written:
-                    report.problem(rel, "unreadable", f"test configurations of '{target}' are also in "
-                                                      f"{written[path]}; only that file's are imported")
-                    continue
-                written[path] = rel
-                scenes, _ = _scene_set(task, target, mine, frame, rel, config_attrs, group=False)
-                if task == "shelving":  # their shelving evaluation uses these configurations only
-                    scenes.attrs["official"]["evaluated"] = list(range(50, len(mine), 10))
-                write_scenes(scenes, path)
-                stats["test_configurations"] += len(scenes)
-            else:
-                n_configs, n_grasps = _write_task(task, target, mine, rel, frame, out, wrist, config_attrs)
-                stats["configurations"] += n_configs
-                stats["rows"] += n_grasps
-                stats["targets"] += 1
+            try:
+                if test:  # a test configuration is one JSON entry, never merged with another
+                    path = out / "test_scenes" / task / f"{object_name(target, task == 'stacking')}.zarr"
+                    if path in written:
+                        report.problem(rel, "unreadable", f"test configurations of '{target}' are also in "
+                                                          f"{written[path]}; only that file's are imported")
+                        continue
+                    written[path] = rel
+                    scenes, _ = _scene_set(task, target, mine, frame, rel, config_attrs, group=False)
+                    if task == "shelving":  # their shelving evaluation uses these configurations only
+                        scenes.attrs["official"]["evaluated"] = list(range(50, len(mine), 10))
+                    write_scenes(scenes, path)
+                    stats["test_configurations"] += len(scenes)
+                else:
+                    n_configs, n_grasps = _write_task(task, target, mine, rel, frame, out, wrist, config_attrs)
+                    stats["configurations"] += n_configs
+                    stats["rows"] += n_grasps
+                    stats["targets"] += 1
+            except Exception as exc:  # noqa: BLE001 - a file whose stores cannot be written is reported
+                report.problem(rel, "unreadable", f"the stores of target {target!r} could not be written "
+                                                  f"({type(exc).__name__}: {exc}); left out")
+                continue
             name = object_name(target, task == "stacking")
             if name in accepted:
                 report.splits[task]["test" if test else split].append(name)
@@ -796,9 +980,8 @@ def import_official(root: str | Path, out: str | Path, hand: HandAssets, tasks: 
     report.files_read = len(reader.digests)
     lines = [f"{d}  {p}\n" for p, d in sorted(reader.digests.items())]
     with atomic_path(out / "checksums.sha256") as tmp:
-        tmp.write_text("".join(lines))
+        tmp.write_text("".join(lines), encoding="utf-8", errors="surrogateescape")
     write_json(out / "import_report.json", report.to_dict())
-    log.info("official import: %d files read, %d problems, %s", report.files_read, report.n_problems, report.tasks)
     return report
 
 
@@ -830,7 +1013,8 @@ def read_import(root: str | Path) -> ImportedDataset:
 
     Raises:
         FileNotFoundError: the folder has no report or catalog (naming the command that writes them).
-        ValueError: a report without the hand or the splits (written by an older tohgs: import again).
+        ValueError: a report without the hand or the splits, or an accepted object whose ``meta.json`` records no
+            checksums of its files (written by an older tohgs: import again).
     """
     import pandas as pd
 
@@ -843,7 +1027,16 @@ def read_import(root: str | Path) -> ImportedDataset:
     report = json.loads(report_path.read_text())
     if not report.get("hand") or not isinstance(report.get("splits"), dict):
         raise ValueError(f"{report_path}: no 'hand' or 'splits' (an import by an older tohgs): import again")
-    catalog = pd.read_csv(catalog_path, usecols=["name"])
+    catalog = pd.read_csv(catalog_path, usecols=["name", "status"])
+    for name in catalog.name[catalog.status == "ok"]:
+        meta_path = root / "objects" / name / "meta.json"
+        try:
+            files = json.loads(meta_path.read_text()).get("files")
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"{meta_path}: unreadable ({exc}): import again") from exc
+        if not isinstance(files, dict):
+            raise ValueError(f"{meta_path}: no checksums of the object's files (an import by an older tohgs): "
+                             "import again")
     return ImportedDataset(root, tuple(sorted(catalog.name)), report["hand"], report["splits"],
                            int(report.get("n_problems", 0)))
 
@@ -964,6 +1157,10 @@ def main(argv: list[str] | None = None) -> int:
     imp.add_argument("--tasks", nargs="+", default=list(TASKS), choices=TASKS)
     imp.add_argument("--density", type=float, default=500.0)
     imp.add_argument("--cache-dir", default=None)
+    imp.add_argument("--max-faces", type=int, default=MeshLimits.max_faces,
+                     help="largest mesh to parse, faces (objects.limits.max_faces)")
+    imp.add_argument("--max-file-mb", type=float, default=MeshLimits.max_file_mb,
+                     help="largest mesh file to parse, MB (objects.limits.max_file_mb)")
     exp = sub.add_parser("export", help="tohgs prediction store -> official result/<run>/<obj>.npy")
     exp.add_argument("predictions")
     exp.add_argument("scenes_dir")
@@ -975,7 +1172,8 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(message)s")
     hand = load_hand_assets(args.hand, args.mano_path)
     if args.command == "import":
-        report = import_official(args.root, args.out, hand, args.tasks, args.density, cache_dir=args.cache_dir)
+        report = import_official(args.root, args.out, hand, args.tasks, args.density, cache_dir=args.cache_dir,
+                                 limits=MeshLimits(args.max_faces, args.max_file_mb))
         for p in report.problems:
             print(f"{p['kind']}: {p['path']}: {p['reason']}")
         print(f"{report.files_read} files read, {report.n_problems} problems; {report.tasks}")

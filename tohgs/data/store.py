@@ -7,14 +7,17 @@ module writes and reads them. A store of fixed arrays declares them once as a :c
 
 **The manifest.** Zarr reads a chunk file that is missing (deleted, or a shard file cut to nothing) as the
 array's fill value, silently. So every store records, as the last step inside its atomic write, a manifest
-in the root attributes: per array its shape, dtype and the SHA-256 of its bytes. A read checks each array
-it returns against it, so a missing or damaged chunk fails with the store's and the array's name instead
-of reading as zeros.
+in the root attributes: per array its shape, dtype and the SHA-256 of its bytes (``arrays``), and the
+SHA-256 of the other root attributes as written (``attributes``: the vocabularies, ``alpha_contact``, the
+config a store was made with). A read checks the attributes and each array it returns against it, so a
+missing or damaged chunk, or an edited attribute, fails with the store's and the array's name instead of
+reading as zeros or as another store's vocabulary.
 """
 
 from __future__ import annotations
 
 import hashlib
+import json
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -30,6 +33,13 @@ _RESERVED = ("schema", "schema_version", MANIFEST)
 def array_digest(data: np.ndarray) -> str:
     """The SHA-256 (hex) of an array's C-ordered bytes (its shape and dtype are recorded beside it)."""
     return hashlib.sha256(np.ascontiguousarray(data).tobytes()).hexdigest()
+
+
+def attrs_digest(attrs: dict[str, Any]) -> str:
+    """The SHA-256 (hex) of root attributes as Zarr stores them (JSON), without the manifest: canonical JSON
+    with sorted keys, so the digest depends on the values only."""
+    body = {k: v for k, v in attrs.items() if k != MANIFEST}
+    return hashlib.sha256(json.dumps(body, sort_keys=True, allow_nan=True).encode()).hexdigest()
 
 
 def write_store(path: str | Path, arrays: dict[str, tuple[np.ndarray, tuple[str, ...]]], attrs: dict[str, Any],
@@ -66,7 +76,8 @@ def write_store(path: str | Path, arrays: dict[str, tuple[np.ndarray, tuple[str,
             if data.size:
                 arr[...] = data
             manifest[name] = {"shape": list(data.shape), "dtype": data.dtype.str, "sha256": array_digest(data)}
-        root.attrs[MANIFEST] = manifest  # last: a store without it was not finished
+        stored = dict(zarr.open_group(str(tmp), mode="r").attrs)  # the attributes as written (JSON)
+        root.attrs[MANIFEST] = {"arrays": manifest, "attributes": attrs_digest(stored)}  # last: else unfinished
 
 
 def read_store(path: str | Path, schema: str, version: int, names: list[str] | None, kind: str,
@@ -107,6 +118,13 @@ def read_store(path: str | Path, schema: str, version: int, names: list[str] | N
     if not isinstance(manifest, dict):
         raise ValueError(f"{path}: no manifest of its arrays (an unfinished write, or a store of an older tohgs); "
                          "rebuild it")
+    if not isinstance(manifest.get("arrays"), dict) or "attributes" not in manifest:
+        raise ValueError(f"{path}: its manifest does not cover the root attributes (a store of an older tohgs); "
+                         "rebuild it")
+    if attrs_digest(attrs) != manifest["attributes"]:
+        raise ValueError(f"{path}: its root attributes (zarr.json) do not match their manifest checksum: edited or "
+                         "damaged after the store was written; rebuild it")
+    manifest = manifest["arrays"]
     arrays = {}
     for name in sorted(manifest) if names is None else names:
         if name not in present:

@@ -12,7 +12,9 @@ grasp_goal         (K, 51)   grasp, param      the same hand carried to the goal
 kept_per_config    (C,)      config            grasps kept per configuration
 =================  ========  ================  ====================================================
 
-Root attributes: ``schema``, ``schema_version``, ``manifest`` (:mod:`tohgs.data.store`), ``task``, ``object``, ``n_prior_accepted``, ``config``.
+Root attributes: ``schema``, ``schema_version``, ``manifest`` (:mod:`tohgs.data.store`), ``task``, ``object``, ``n_prior_accepted``, ``config``,
+and (generated stores) ``rejected_init`` / ``rejected_goal``: per configuration, the accepted prior grasps the
+scene rejects at the initial / goal pose (:func:`tohgs.grasps.expand.expand_configurations`).
 """
 
 from __future__ import annotations

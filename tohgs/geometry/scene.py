@@ -15,17 +15,25 @@ from tohgs.assets.mesh import object_mesh
 from tohgs.geometry.grasp import pose_matrix
 
 
+def _cached_object(objects_dir: str | Path, name: str, cache: dict[str, trimesh.Trimesh]) -> trimesh.Trimesh:
+    if name not in cache:
+        cache[name] = object_mesh(objects_dir, name)
+    return cache[name]
+
+
+def obstacle_meshes(scenes, c: int, objects_dir: str | Path, meshes: dict[str, trimesh.Trimesh] | None = None
+                    ) -> list[trimesh.Trimesh]:
+    """World-frame meshes of configuration ``c``'s obstacles (neither the support nor the base brick).
+    ``meshes`` caches object meshes by name."""
+    cache = {} if meshes is None else meshes
+    return [_cached_object(objects_dir, o, cache).copy().apply_transform(pose_matrix(p)) for o, p in scenes.obstacles(c)]
+
+
 def scene_meshes(scenes, c: int, objects_dir: str | Path, supports: dict, meshes: dict[str, trimesh.Trimesh] | None = None
                  ) -> list[trimesh.Trimesh]:
     """World-frame meshes of configuration ``c``'s scene without the target: the support (table or shelf),
     the base brick (Stacking) and the obstacles. ``meshes`` caches object meshes by name."""
     cache = {} if meshes is None else meshes
-
-    def obj(name: str) -> trimesh.Trimesh:
-        if name not in cache:
-            cache[name] = object_mesh(objects_dir, name)
-        return cache[name]
-
     sname, spose = scenes.support(c)
     skey = f"support:{sname}"
     if skey not in cache:
@@ -33,10 +41,32 @@ def scene_meshes(scenes, c: int, objects_dir: str | Path, supports: dict, meshes
     out = [cache[skey].copy().apply_transform(pose_matrix(spose))]
     base = scenes.base(c)
     if base is not None:
-        out.append(obj(base[0]).copy().apply_transform(pose_matrix(base[1])))
-    for oname, opose in scenes.obstacles(c):
-        out.append(obj(oname).copy().apply_transform(pose_matrix(opose)))
-    return out
+        out.append(_cached_object(objects_dir, base[0], cache).copy().apply_transform(pose_matrix(base[1])))
+    return out + obstacle_meshes(scenes, c, objects_dir, cache)
+
+
+def obstacle_gaps(scenes, c: int, objects_dir: str | Path, target_points: np.ndarray,
+                  meshes: dict[str, trimesh.Trimesh] | None = None) -> tuple[float, float]:
+    """The gap between the target and its nearest obstacle in configuration ``c``, at the initial and at
+    the goal pose, m: the smallest distance from the target's (N, 3) surface points (its mesh frame) to an
+    obstacle's surface (0 where they touch); NaN for a configuration without obstacles. The support and the
+    base brick, which the target rests on, are not obstacles."""
+    from tohgs.geometry.raycast import raycasting_scene
+
+    obstacles = obstacle_meshes(scenes, c, objects_dir, meshes)
+    if not obstacles:
+        return float("nan"), float("nan")
+    import open3d as o3d
+
+    merged = trimesh.util.concatenate(obstacles)
+    scene = raycasting_scene(merged.vertices, merged.faces)
+    gaps = []
+    for pose in (scenes.target_init_pose[c], scenes.target_goal_pose[c]):
+        T = pose_matrix(pose)
+        pts = np.asarray(target_points, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
+        d = scene.compute_distance(o3d.core.Tensor(np.ascontiguousarray(pts, dtype=np.float32))).numpy()
+        gaps.append(float(d.min()))
+    return gaps[0], gaps[1]
 
 
 class SceneCollider:

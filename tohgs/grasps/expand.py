@@ -47,25 +47,31 @@ def expand_configurations(scenes, prior_pose: np.ndarray, hand: HandAssets, obje
 
     Returns:
         ``config`` (K,), ``prior_index`` (K,), ``grasp_init`` and ``grasp_goal`` (K, 51) world-frame grasp
-        vectors, and ``kept_per_config`` (C,).
+        vectors, ``kept_per_config`` (C,), and ``rejected_init`` / ``rejected_goal`` (C,): per configuration
+        the prior grasps the scene rejects at the initial / the goal pose (a grasp may be rejected at both):
+        how hard the scene is, whatever method is run on it.
     """
     if len(prior_pose) == 0:
         log.warning("%s %s: no accepted prior grasp, so no task grasp", scenes.task, scenes.object)
         return {"config": np.zeros(0, np.int32), "prior_index": np.zeros(0, np.int32),
                 "grasp_init": np.zeros((0, 51), np.float32), "grasp_goal": np.zeros((0, 51), np.float32),
-                "kept_per_config": np.zeros(len(scenes), np.int64)}
+                "kept_per_config": np.zeros(len(scenes), np.int64),
+                "rejected_init": np.zeros(len(scenes), np.int64), "rejected_goal": np.zeros(len(scenes), np.int64)}
     local = hand.vertices(prior_pose)  # (A, V, 3) in the target's mesh frame
     wrist = np.asarray(hand.rest_joints[0], dtype=np.float64)
     cache: dict[str, trimesh.Trimesh] = {}
     rows: dict[str, list] = {"config": [], "prior_index": [], "grasp_init": [], "grasp_goal": []}
     kept = np.zeros(len(scenes), dtype=np.int64)
+    rejected = np.zeros((2, len(scenes)), dtype=np.int64)  # at the initial, at the goal pose
     for c in range(len(scenes)):
         collider = SceneCollider(scene_meshes(scenes, c, objects_dir, supports, cache))
         ok = np.ones(len(local), dtype=bool)
-        for pose in (scenes.target_init_pose[c], scenes.target_goal_pose[c]):
+        for p, pose in enumerate((scenes.target_init_pose[c], scenes.target_goal_pose[c])):
             T = pose_matrix(pose)
             world = local @ T[:3, :3].T + T[:3, 3]
-            ok &= collision_free(world, collider, settings.tolerance)
+            free = collision_free(world, collider, settings.tolerance)
+            rejected[p, c] = int((~free).sum())
+            ok &= free
         idx = np.flatnonzero(ok)
         kept[c] = len(idx)
         rows["config"] += [c] * len(idx)
@@ -77,7 +83,7 @@ def expand_configurations(scenes, prior_pose: np.ndarray, hand: HandAssets, obje
             "prior_index": np.asarray(rows["prior_index"], dtype=np.int32),
             "grasp_init": np.concatenate(rows["grasp_init"]).astype(np.float32) if rows["grasp_init"] else np.zeros((0, 51), np.float32),
             "grasp_goal": np.concatenate(rows["grasp_goal"]).astype(np.float32) if rows["grasp_goal"] else np.zeros((0, 51), np.float32),
-            "kept_per_config": kept}
+            "kept_per_config": kept, "rejected_init": rejected[0], "rejected_goal": rejected[1]}
 
 
 def make_task_grasps(scene_store: str | Path, prior_store: str | Path, objects_dir: str | Path,
@@ -98,8 +104,9 @@ def make_task_grasps(scene_store: str | Path, prior_store: str | Path, objects_d
     out_arrays = expand_configurations(scenes, accepted, hand, objects_dir, read_supports(supports_json), s)
     out_arrays["prior_index"] = np.flatnonzero(prior.passed)[out_arrays["prior_index"]].astype(np.int32)
     kept = out_arrays["kept_per_config"]
+    rejected = {k: out_arrays.pop(k).tolist() for k in ("rejected_init", "rejected_goal")}
     log.info("%s %s: %d accepted prior grasps -> %d task grasps over %d configurations (per configuration: %s)",
              scenes.task, scenes.object, len(accepted), int(kept.sum()), len(kept), kept.tolist())
     write_task_grasps(out_arrays, {"task": scenes.task, "object": scenes.object, "n_prior_accepted": int(len(accepted)),
-                                   "config": {"tolerance": s.tolerance}}, out)
+                                   "config": {"tolerance": s.tolerance}, **rejected}, out)
     return out_arrays

@@ -67,7 +67,7 @@ def object_seed(seed: int, name: str) -> int:
 def evaluate_grasps(hand: HandModel, pose: np.ndarray, mesh: trimesh.Trimesh, collision_obj: str | Path,
                     sd_settings: SDSettings, voxel_pitch: float = 0.001, progress: bool = False,
                     cache_dir: str | Path | None = None, simulate: np.ndarray | None = None,
-                    voxels: np.ndarray | None = None) -> dict[str, np.ndarray]:
+                    voxels: np.ndarray | None = None, workers: int = 1) -> dict[str, np.ndarray]:
     """PV (m^3), SD (m) and contact distance (m) of (B, 51) grasps of one object in its mesh frame; SD's
     gravity per grasp as ``sd_settings.gravity_direction`` says (:func:`tohgs.metrics.quality.palm_gravity` by default); the
     object's surface voxels are cached under ``cache_dir``.
@@ -75,7 +75,8 @@ def evaluate_grasps(hand: HandModel, pose: np.ndarray, mesh: trimesh.Trimesh, co
     ``simulate``: (B,) bool, the grasps whose SD is simulated (None: all); the others get SD NaN. Each
     grasp's metrics are its own (one PyBullet world reset per grasp), so a grasp measures the same with or
     without the others. ``voxels``: the object's surface voxels if already at hand (else
-    :func:`~tohgs.metrics.quality.surface_voxels`)."""
+    :func:`~tohgs.metrics.quality.surface_voxels`). SD runs in ``workers`` processes (the same numbers as
+    one, :meth:`tohgs.metrics.quality.DisplacementSimulator.displacements`)."""
     with torch.no_grad():
         verts = hand(torch.as_tensor(pose, dtype=hand.rest_vertices.dtype)).vertices.cpu().numpy().astype(np.float64)
     faces = hand.closed_faces.cpu().numpy()
@@ -84,7 +85,7 @@ def evaluate_grasps(hand: HandModel, pose: np.ndarray, mesh: trimesh.Trimesh, co
     out = {"pv": np.zeros(len(verts)), "sd": np.full(len(verts), np.nan), "contact_distance": np.zeros(len(verts))}
     if sim_rows.any():
         centre = np.asarray(mesh.vertices).mean(0)
-        with DisplacementSimulator(collision_obj, centre, sd_settings) as sim:
+        with DisplacementSimulator(collision_obj, centre, sd_settings, workers=workers) as sim:
             measured = hand_quality(verts[sim_rows], faces, hand.assets.palm_ids, mesh, voxels, sim, voxel_pitch,
                                     progress=progress)
         for k in out:
@@ -112,7 +113,7 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
         seed: the global seed (combined with the object's name).
         out: the raw store to write.
         cache_dir: cache root for SDF grids and surface voxels (None: no cache).
-        threads: torch threads.
+        threads: the job's cores: torch threads of the synthesis, then SD's worker processes.
         screen: the filter's thresholds of the checks that need no metric (:data:`~tohgs.grasps.filter.SCREEN_KEYS`,
             a config mapping): SD is simulated only for the grasps that pass them
             (:func:`~tohgs.grasps.filter.screen_flags`), NaN for the others, and the store records them
@@ -156,7 +157,7 @@ def make_prior_grasps(object_dir: str | Path, hand: HandModel, hand_name: str, s
         log.info("%s: %d of %d grasps pass the energy and joint-limit checks; SD simulates only those", name,
                  int(simulate.sum()), len(simulate))
     metrics = evaluate_grasps(hand, pose, mesh, object_dir / "collision.obj", s_sd, voxel_pitch, progress=True,
-                              cache_dir=cache_dir, simulate=simulate, voxels=voxels)
+                              cache_dir=cache_dir, simulate=simulate, voxels=voxels, workers=threads)
     timing["metrics"], cpu_timing["metrics"] = time.perf_counter() - t0, time.process_time() - c0
     sd = metrics["sd"][np.isfinite(metrics["sd"])]
     log.info("%s: PV median %.2f cm^3, SD median %.2f cm (%d simulated), metrics in %.1f s", name,

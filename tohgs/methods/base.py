@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import zlib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -20,8 +21,10 @@ class PredictSettings:
     ``filter``, ``contactgen`` and ``flex``: GraspTTA's adaptation, F-GraspTTA's filter, ContactGen's solver
     and FLEX's optimisation (:mod:`tohgs.methods.grasp_tta`, :mod:`tohgs.methods.filtered`,
     :mod:`tohgs.methods.contact_gen`, :mod:`tohgs.methods.flex`); ``steer``, scene-aware guidance of
-    GraspDiffuser's sampling (:mod:`tohgs.models.guidance`; beyond the paper, off by default). A
-    method's ``settings`` block overlays the config's ``prediction`` block (the two sub-blocks key by key)."""
+    GraspDiffuser's sampling (:mod:`tohgs.models.guidance`; beyond the paper, off by default); ``chunk``,
+    the test configurations an optimising method solves as one batch of (configurations x samples) hands
+    (:meth:`Method.predict_many`; 1: one at a time, the same grasps either way). A method's ``settings``
+    block overlays the config's ``prediction`` block (the two sub-blocks key by key)."""
 
     samples: int = 16
     sampler: str = "ddim"
@@ -36,6 +39,11 @@ class PredictSettings:
     contactgen: dict = field(default_factory=dict)  # tohgs.grasps.contactgen_solver.SolverSettings
     flex: dict = field(default_factory=dict)  # tohgs.grasps.flex.FlexSettings
     steer: dict = field(default_factory=dict)  # tohgs.models.guidance.GuidanceSettings (scene-aware guidance)
+    chunk: int = 8  # configurations per batch of an optimising method (1: one at a time; bounds memory)
+
+    def __post_init__(self):
+        if self.chunk < 1:
+            raise ValueError(f"prediction.chunk must be at least 1, got {self.chunk}")
 
 
 @dataclass
@@ -52,13 +60,28 @@ class Prediction:
     info: dict[str, float] = field(default_factory=dict)
 
 
+@dataclass(frozen=True)
+class Request:
+    """One test configuration to predict: ``batch`` the configuration repeated S times (no contact, no
+    grasp), ``shard`` / ``row`` where it lies, ``generator`` (torch) and ``rng`` (numpy) its seeded streams
+    (:func:`tohgs.methods.predict.configuration_streams`)."""
+
+    batch: Batch
+    shard: MapShard
+    row: int
+    generator: torch.Generator
+    rng: np.random.Generator
+
+
 class Method:
     """A method kind: built once per prediction job from its config block, its trained components (by
     config name, eval mode, on ``device``), the settings, the hand model (on ``device``; the methods that
     pose hands use it) and, for a method of another method (``filtered``), that method's prediction store
     (arrays, attrs); then asked for each test configuration.
 
-    Subclasses set ``needs`` (the method keys that must name components) and implement :meth:`predict`.
+    Subclasses set ``needs`` (the method keys that must name components) and implement :meth:`predict`;
+    an optimising method also overrides :meth:`predict_many` to solve the hands of several configurations
+    as one batch, with the same grasps per configuration as :meth:`predict`.
     """
 
     def __init__(self, name: str, cfg: dict[str, Any], models: dict[str, torch.nn.Module], settings: PredictSettings,
@@ -72,6 +95,11 @@ class Method:
         if self.hand is None:
             raise ValueError(f"method {self.name!r}: {why}; the prediction job needs the hand model")
         return self.hand
+
+    def ground_truth(self, shard: MapShard, row: int, count: int | None = None) -> np.ndarray:
+        """The ground-truth task grasps this method reads for configuration ``row`` (``count``, default S):
+        :func:`ground_truth_pick` with the job's seed, so every ground-truth row of a seed reads the same."""
+        return ground_truth_pick(shard, row, self.settings.samples if count is None else count, self.settings.seed)
 
     def model(self, key: str) -> torch.nn.Module:
         """The component the method key ``key`` names (a clear error when the job was not given it)."""
@@ -90,7 +118,30 @@ class Method:
         cannot be predicted (e.g. ground-truth maps where it has no task grasp)."""
         raise NotImplementedError
 
+    def predict_many(self, requests: list[Request]) -> list[Prediction | None]:
+        """The predictions of several configurations (``settings.chunk`` of them at most), in order: each
+        as :meth:`predict` would make it alone (its own streams, maps, selections). This default predicts
+        them one at a time."""
+        return [self.predict(r.batch, r.shard, r.row, r.generator, r.rng) for r in requests]
+
 
 def gt_rows(shard: MapShard, row: int) -> np.ndarray:
     """The task grasps (rows of the shard's grasp arrays) of configuration ``row``."""
     return np.flatnonzero(shard.grasp_config == row)
+
+
+def ground_truth_pick(shard: MapShard, row: int, count: int, seed: int) -> np.ndarray:
+    """(count,) the task grasps (rows of the shard's grasp arrays) that every ground-truth row reads for
+    configuration ``row``: its task grasps in a random order drawn from ``seed``, the object's name and the
+    configuration's index, cycled to ``count`` (a configuration with fewer grasps repeats them in turn);
+    empty for a configuration without task grasps. The ``Dataset`` row and the ground-truth-contact rows of a
+    seed thus evaluate the same grasps of the same configurations (paired rows)."""
+    ids = gt_rows(shard, row)
+    if len(ids) == 0:
+        return ids
+    name = shard.attrs["objects"][int(shard.object_id[row])]
+    rng = np.random.default_rng([int(seed), zlib.crc32(name.encode()), int(shard.config_index[row]), GROUND_TRUTH_STREAM])
+    return rng.permutation(ids)[np.arange(count) % len(ids)]
+
+
+GROUND_TRUTH_STREAM = 0x67  # the key of the ground-truth pick's stream, apart from a configuration's sampling streams

@@ -1,7 +1,8 @@
 """Kind ``contact_grasp`` (paper section 4.4): a contact source, then a grasp generator on its maps.
 
 Keys of the method block: ``contact``, a contact component (``sample_contact``: ContactDiffuser, ...),
-``ground_truth`` (the configuration's own task-grasp maps, cycled to S: the paper's GT-contact rows) or
+``ground_truth`` (the configuration's own task-grasp maps: the same grasps the ``Dataset`` row evaluates,
+:func:`tohgs.methods.base.ground_truth_pick`; the paper's GT-contact rows) or
 ``none`` (a generator that reads the object alone: SceneDiffuser), and ``grasp``, a grasp component
 (``sample_grasps``: GraspDiffuser, ...). Per test configuration: S contact maps, one grasp per map. A
 component's maps may be smoothed (``settings.contact_smoothing``: each value the mean over its k nearest
@@ -23,7 +24,7 @@ import torch
 from tohgs.geometry.cloud import even_subset
 from tohgs.geometry.hand_object import contact_values
 from tohgs.methods import GROUND_TRUTH
-from tohgs.methods.base import Method, Prediction, gt_rows
+from tohgs.methods.base import Method, Prediction
 from tohgs.models.guidance import GraspEnergy, GuidanceSettings, select_diverse
 
 NO_CONTACT = "none"
@@ -88,10 +89,10 @@ class ContactGrasp(Method):
                 extra = {"steer": self.steer, "distance_alpha": float(shard.attrs.get("alpha_distance", 30.0))}
             contact = self.contact_model.sample_contact(batch, s.sampler, s.steps, generator, **extra)
             return smooth_contact(batch.points[0], contact, s.contact_smoothing)
-        ids = gt_rows(shard, row)
+        ids = self.ground_truth(shard, row, batch.size)
         if len(ids) == 0:
             return None
-        return torch.as_tensor(shard.contact[ids[np.arange(batch.size) % len(ids)]], device=batch.device)
+        return torch.as_tensor(shard.contact[ids], device=batch.device)
 
     def _select(self, batch, contact: torch.Tensor, grasp: torch.Tensor, keep: int
                 ) -> tuple[torch.Tensor, torch.Tensor, dict[str, float]]:

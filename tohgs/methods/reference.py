@@ -1,26 +1,27 @@
 """Kind ``reference``: the ``Dataset`` row, held-out ground-truth task grasps of each test configuration.
 
-Per test configuration with at least one ground-truth grasp, S of them are drawn without replacement (the
-job's seeded numpy stream); a configuration with fewer grasps repeats them in turn (its DS is then a lower
-bound). Configurations without a ground-truth grasp are left out. Evaluated exactly like a method's
-grasps, the row checks the metrics and bounds what a method can reach.
+Per test configuration, S of its ground-truth grasps in a seeded random order
+(:func:`tohgs.methods.base.ground_truth_pick`: the same grasps the ground-truth-contact rows read, so the rows
+are paired); a configuration with fewer grasps repeats them in turn (its DS is then a lower bound). The test
+split holds only configurations with ground truth (:func:`tohgs.data.build_maps.with_ground_truth`); one
+without would be left out, and the tables count it as missing. Evaluated exactly like a method's grasps,
+the row checks the metrics and bounds what a method can reach.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from tohgs.methods.base import Method, Prediction, gt_rows
+from tohgs.methods.base import Method, Prediction
 
 
 class Reference(Method):
     """Ground-truth task grasps as predictions (no components)."""
 
     def predict(self, batch, shard, row, generator, rng) -> Prediction | None:
-        ids = gt_rows(shard, row)
-        if len(ids) == 0:
+        pick = self.ground_truth(shard, row)
+        if len(pick) == 0:
             return None
-        pick = rng.permutation(ids)[np.arange(self.settings.samples) % len(ids)]
         return Prediction(shard.contact[pick], shard.grasp[pick].astype(np.float64))
 
 

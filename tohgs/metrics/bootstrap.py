@@ -21,10 +21,10 @@ import numpy as np
 import pandas as pd
 
 #: The cells that get intervals (the counts ``grasps``, ``configs`` and ``discarded`` do not).
-INTERVAL_COLUMNS = ("pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "init_opp", "goal_opp", "ts",
-                    "sd_robust", "sd_pass", "sd_unstable")
+INTERVAL_COLUMNS = ("pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "ds_per_vertex", "init_opp", "goal_opp",
+                    "ts", "sd_robust", "sd_pass", "sd_unstable", "sd_palm_avg", "qr_palm")
 _STATS = ("n", "pv", "pv2", "sd", "sd2", "contact", "quality", "init_opp", "goal_opp", "ds", "has_ds",
-          "n_robust", "sd_robust", "sd_pass", "sd_unstable")
+          "n_robust", "sd_robust", "sd_pass", "sd_unstable", "ds_vertex", "n_palm", "sd_palm", "quality_palm")
 
 
 def robust_stats(frame: pd.DataFrame, max_sd: float) -> pd.DataFrame:
@@ -64,29 +64,45 @@ def config_keys(frame: pd.DataFrame) -> pd.DataFrame:
     return frame[["object", "config_index"]].drop_duplicates().sort_values(["object", "config_index"]).reset_index(drop=True)
 
 
-def config_ds(frame: pd.DataFrame) -> pd.Series:
+def config_ds(frame: pd.DataFrame, per_vertex: bool = False) -> pd.Series:
     """DS per configuration (object, config_index) and, for rows of several seeds (column ``seed``,
-    :func:`tohgs.metrics.tables.read_metrics`), per seed: each (configuration, seed)'s first row's."""
-    return frame.groupby(["object", "config_index"] + (["seed"] if "seed" in frame.columns else [])).ds.first()
+    :func:`tohgs.metrics.tables.read_metrics`), per seed: each (configuration, seed)'s first row's; with
+    ``per_vertex`` divided by the hand's vertex count (column ``hand_vertices``), m per vertex."""
+    keys = ["object", "config_index"] + (["seed"] if "seed" in frame.columns else [])
+    if per_vertex:
+        return frame.assign(ds=frame.ds / frame.hand_vertices).groupby(keys).ds.first()
+    return frame.groupby(keys).ds.first()
+
+
+def palm_sd(frame: pd.DataFrame) -> pd.Series:
+    """The rows' SD out of the palm (column ``sd_palm``, m; NaN for rows without one, and for files that
+    predate it)."""
+    return frame.sd_palm if "sd_palm" in frame.columns else pd.Series(np.nan, index=frame.index)
 
 
 def config_stats(frame: pd.DataFrame, keys: pd.DataFrame, max_pv: float, max_sd: float) -> np.ndarray:
-    """(C, 15) per configuration of ``keys``: kept grasps n, the sums of PV, PV^2, SD, SD^2 (SI units), the
+    """(C, 19) per configuration of ``keys``: kept grasps n, the sums of PV, PV^2, SD, SD^2 (SI units), the
     counts in contact (PV > 0) and of quality (PV < max_pv and SD < max_sd), the sums of the two OPPs
     (fractions), the sum of the configuration's DS over its seeds and how many seeds have one; then the
-    count of grasps with perturbed SDs and the sums of their :func:`robust_stats`."""
+    count of grasps with perturbed SDs and the sums of their :func:`robust_stats`; then the sum of DS per
+    hand vertex, and the count of grasps with an SD out of the palm, its sum and its quality count."""
     if "kept" in frame.columns:
         frame = frame[frame.kept.astype(bool)]
     out = np.zeros((len(keys), len(_STATS)))
     if len(frame) == 0:
         return out
+    sd_palm = palm_sd(frame)
     f = frame.assign(pv2=frame.pv**2, sd2=frame.sd**2, contact=(frame.pv > 0).astype(float),
-                     quality=((frame.pv < max_pv) & (frame.sd < max_sd)).astype(float))
+                     quality=((frame.pv < max_pv) & (frame.sd < max_sd)).astype(float),
+                     has_palm=sd_palm.notna().astype(float), sd_palm=sd_palm.fillna(0.0),
+                     quality_palm=((frame.pv < max_pv) & (sd_palm < max_sd)).astype(float))
     g = f.groupby(["object", "config_index"])
     ds_g = config_ds(f).groupby(level=["object", "config_index"])
     agg = pd.DataFrame({"n": g.size(), "pv": g.pv.sum(), "pv2": g.pv2.sum(), "sd": g.sd.sum(), "sd2": g.sd2.sum(),
                         "contact": g.contact.sum(), "quality": g.quality.sum(), "init_opp": g.init_opp.sum(),
-                        "goal_opp": g.goal_opp.sum(), "ds": ds_g.sum(), "has_ds": ds_g.count().astype(float)})
+                        "goal_opp": g.goal_opp.sum(), "ds": ds_g.sum(), "has_ds": ds_g.count().astype(float),
+                        "ds_vertex": config_ds(f, per_vertex=True).groupby(level=["object", "config_index"]).sum(),
+                        "n_palm": g.has_palm.sum(), "sd_palm": g.sd_palm.sum(), "quality_palm": g.quality_palm.sum()})
     rob = robust_stats(frame, max_sd)
     if len(rob):
         gr = rob.groupby(["object", "config_index"])
@@ -97,24 +113,27 @@ def config_stats(frame: pd.DataFrame, keys: pd.DataFrame, max_pv: float, max_sd:
 
 
 def cells(weights: np.ndarray, stats: np.ndarray) -> dict[str, np.ndarray]:
-    """Every interval column (units as the tables': cm^3, cm, %) for (B, C) configuration weights and
-    (C, 15) :func:`config_stats`; (B,) each, NaN where a resample holds no kept grasp (no perturbed one
-    for the robust-SD columns)."""
-    s = weights @ stats  # (B, 15)
+    """Every interval column (units as the tables': cm^3, cm, %; DS per vertex in cm) for (B, C)
+    configuration weights and (C, 19) :func:`config_stats`; (B,) each, NaN where a resample holds no kept
+    grasp (no perturbed one for the robust-SD columns, no SD out of the palm for those columns)."""
+    s = weights @ stats  # (B, 19)
     col = {k: s[:, i] for i, k in enumerate(_STATS)}
     with np.errstate(invalid="ignore", divide="ignore"):
         n = np.where(col["n"] > 0, col["n"], np.nan)
         nr = np.where(col["n_robust"] > 0, col["n_robust"], np.nan)
+        npalm = np.where(col["n_palm"] > 0, col["n_palm"], np.nan)
+        has_ds = np.where(col["has_ds"] > 0, col["has_ds"], np.nan)
         pv, sd = col["pv"] / n, col["sd"] / n
         qr = col["quality"] / n
         init, goal = col["init_opp"] / n, col["goal_opp"] / n
         return {"pv_avg": pv * 1e6, "pv_std": np.sqrt(np.maximum(col["pv2"] / n - pv**2, 0)) * 1e6,
                 "sd_avg": sd * 100, "sd_std": np.sqrt(np.maximum(col["sd2"] / n - sd**2, 0)) * 100,
                 "cr": col["contact"] / n * 100, "qr": qr * 100,
-                "ds": col["ds"] / np.where(col["has_ds"] > 0, col["has_ds"], np.nan),
+                "ds": col["ds"] / has_ds, "ds_per_vertex": col["ds_vertex"] / has_ds * 100,
                 "init_opp": init * 100, "goal_opp": goal * 100, "ts": qr * (1 - init) * (1 - goal),
                 "sd_robust": col["sd_robust"] / nr * 100, "sd_pass": col["sd_pass"] / nr * 100,
-                "sd_unstable": col["sd_unstable"] / nr * 100}
+                "sd_unstable": col["sd_unstable"] / nr * 100, "sd_palm_avg": col["sd_palm"] / npalm * 100,
+                "qr_palm": col["quality_palm"] / npalm * 100}
 
 
 def resample_weights(objects: np.ndarray, samples: int, rng: np.random.Generator,

@@ -12,6 +12,13 @@ where lower is better) is computed on the whole test set and on every hierarchic
 verdict: **holds** where the interval's lower end is above 0, **does not hold** where its upper end is
 below 0, **cannot tell** otherwise.
 
+Beside the bootstrap, a per-object paired test: for each test object, the difference of the metric between
+``better`` and the other method that is best on the whole set, computed on that object's grasps alone;
+``p_objects`` is the two-sided sign-flip permutation test of their mean (every one of the 2^K sign patterns
+for up to :data:`EXACT_OBJECTS` objects, else :data:`FLIPS` random ones), ``objects_favour`` how many of the K
+objects favour ``better``, and ``paired_verdict`` holds / does not hold where ``p_objects`` < 5 % (by the
+sign of the mean) and cannot tell otherwise. With 5 or fewer objects the test can never reach 5 %.
+
 ``objects_needed``: how many test objects per task the benchmark would need for the interval to exclude 0,
 were the difference what it is here, measured from the bootstrap: test sets of K' objects drawn (with
 replacement, then their configurations) from the K of this run, for K' = K, 2K, 3K, 4K, 6K, 8K, ...
@@ -30,7 +37,10 @@ from tohgs.metrics.tables import QualityThresholds
 
 LOWER_IS_BETTER = ("pv_avg", "pv_std", "sd_avg", "sd_std", "init_opp", "goal_opp")
 CLAIM_COLUMNS = ("claim", "text", "task", "metric", "better", "than", "difference", "lo", "hi", "verdict",
-                 "objects", "objects_needed")
+                 "objects", "objects_needed", "objects_favour", "p_objects", "paired_verdict")
+EXACT_OBJECTS = 16  # up to this many objects the permutation test enumerates every sign pattern
+FLIPS = 20000  # random sign patterns beyond
+PAIRED_LEVEL = 0.05
 SCALES = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64)  # test sets of K' = scale x K objects (objects_needed)
 
 
@@ -52,6 +62,35 @@ def objects_needed(keys: pd.DataFrame, difference, bootstrap: BootstrapSettings,
         if verdict(*np.percentile(d, [tail, 100 - tail])) != "cannot tell":
             return float(scale * k)
     return float("nan")
+
+
+def sign_flip_test(differences: np.ndarray, rng: np.random.Generator) -> float:
+    """Two-sided p-value of the mean of (K,) paired differences under random sign flips (a permutation
+    test of "no difference": each object's difference is as likely negative as positive); NaN for K = 0.
+    Exact (all 2^K patterns) for K <= :data:`EXACT_OBJECTS`, else :data:`FLIPS` random patterns."""
+    d = np.asarray(differences, dtype=np.float64)
+    d = d[np.isfinite(d)]
+    k = len(d)
+    if k == 0:
+        return float("nan")
+    if k <= EXACT_OBJECTS:
+        signs = 1 - 2 * ((np.arange(2**k)[:, None] >> np.arange(k)[None, :]) & 1)  # (2^K, K)
+    else:
+        signs = rng.choice(np.array([-1, 1]), size=(FLIPS, k))
+    means = np.abs(signs @ d) / k
+    observed = abs(d.mean())
+    return float(np.mean(means >= observed - 1e-12 * max(1.0, observed)))
+
+
+def per_object_differences(keys: pd.DataFrame, stats: dict[str, np.ndarray], metric: str, better: str,
+                           other: str, sign: float) -> np.ndarray:
+    """(K,) per test object of ``keys`` (sorted by name): ``sign`` x (the metric of ``better`` - that of
+    ``other``) on the object's configurations alone (:func:`tohgs.metrics.bootstrap.cells` with one weight
+    row per object)."""
+    objects = keys.object.to_numpy()
+    names = np.unique(objects)
+    w = (objects[None, :] == names[:, None]).astype(np.float64)  # (K, C)
+    return sign * (cells(w, stats[better])[metric] - cells(w, stats[other])[metric])
 
 
 def verdict(lo: float, hi: float) -> str:
@@ -91,7 +130,7 @@ def claim_rows(rows: pd.DataFrame, name: str, claim: dict, table_rows: list[str]
             out.append({"claim": name, "text": claim.get("text", ""), "task": task, "metric": metric,
                         "better": labels.get(better, better), "than": ", ".join(labels.get(m, m) for m in than),
                         "difference": np.nan, "lo": np.nan, "hi": np.nan, "verdict": why, "objects": 0,
-                        "objects_needed": np.nan})
+                        "objects_needed": np.nan, "objects_favour": 0, "p_objects": np.nan, "paired_verdict": why})
             continue
         in_task = rows[(rows.task == task) & rows.method.isin([better, *than])]
         keys = config_keys(in_task)
@@ -109,12 +148,20 @@ def claim_rows(rows: pd.DataFrame, name: str, claim: dict, table_rows: list[str]
         boot = diff[1:][np.isfinite(diff[1:])]
         lo, hi = (np.percentile(boot, [tail, 100 - tail]) if len(boot) and bootstrap.samples > 0 else (np.nan, np.nan))
         told = verdict(lo, hi)
+        whole = {m: sign * cells(weights[:1], stats[m])[metric][0] for m in than}
+        best = max(than, key=lambda m: whole[m] if np.isfinite(whole[m]) else -np.inf)
+        per_object = per_object_differences(keys, stats, metric, better, best, sign)
+        p = sign_flip_test(per_object, np.random.default_rng([bootstrap.seed, tasks.index(task), 13]))
+        mean = float(np.nanmean(per_object)) if np.isfinite(per_object).any() else float("nan")
+        paired = (("holds" if mean > 0 else "does not hold") if np.isfinite(p) and p < PAIRED_LEVEL
+                  else "cannot tell")
         out.append({"claim": name, "text": claim.get("text", ""), "task": task, "metric": metric,
                     "better": labels.get(better, better), "than": ", ".join(labels.get(m, m) for m in than),
                     "difference": float(diff[0]), "lo": float(lo), "hi": float(hi), "verdict": told,
                     "objects": int(keys.object.nunique()),
                     "objects_needed": needed(keys, difference, told, bootstrap, diff[0],
-                                             [bootstrap.seed, tasks.index(task), 11])})
+                                             [bootstrap.seed, tasks.index(task), 11]),
+                    "objects_favour": int((per_object > 0).sum()), "p_objects": p, "paired_verdict": paired})
     return out
 
 
@@ -132,17 +179,22 @@ def claims_table(rows: pd.DataFrame, claims: dict[str, dict], tables: dict[str, 
 def claims_markdown(table: pd.DataFrame, level: float) -> str:
     """The claims table in markdown: per claim and task, the difference with its interval and the verdict."""
     lines = [f"| Claim | Task | Metric | Method | Against (best of) | Difference | {level:.0%} interval | Verdict | "
-             "Test objects: here / to tell |", "|---|---|---|---|---|---|---|---|---|"]
+             "Test objects: here / to tell | Objects favouring | Paired p | Paired verdict |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for _, r in table.iterrows():
         interval = "–" if not np.isfinite(r.lo) else f"[{r.lo:+.3f}, {r.hi:+.3f}]"
         diff = "–" if not np.isfinite(r.difference) else f"{r.difference:+.3f}"
         need = (f"{int(r.objects_needed)}" if np.isfinite(r.objects_needed) else
                 f"> {SCALES[-1] * int(r.objects)}" if np.isfinite(r.difference) else "–")
+        p = "–" if not np.isfinite(r.p_objects) else f"{r.p_objects:.3f}"
         lines.append(f"| {r.claim}: {r.text} | {r.task} | {r.metric} | {r.better} | {r.than} | {diff} | "
-                     f"{interval} | {r.verdict} | {int(r.objects)} / {need} |")
+                     f"{interval} | {r.verdict} | {int(r.objects)} / {need} | {int(r.objects_favour)} / "
+                     f"{int(r.objects)} | {p} | {r.paired_verdict} |")
     lines += ["", "Difference: the method's value minus the best of the others' (for OPP, PV and SD the others' "
               "minus the method's), so a positive value favours the method; intervals from the hierarchical "
               "bootstrap over test objects and configurations, paired across methods. Test objects to tell: "
               "the fewest test objects per task (drawn like this run's) whose interval would exclude 0 at "
-              "this difference, from the bootstrap."]
+              "this difference, from the bootstrap. Paired: per test object, the method against the other that is "
+              "best on the whole set; the p-value of a sign-flip permutation test over the objects (it cannot go "
+              "below 5 % with 5 or fewer objects)."]
     return "\n".join(lines) + "\n"

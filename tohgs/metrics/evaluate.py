@@ -4,8 +4,11 @@ For every predicted grasp of a test configuration (a prediction store, :mod:`toh
 
 - ``pv`` (m^3), ``sd`` (m), ``contact_distance`` (m): the quality metrics of :mod:`tohgs.metrics.quality`
   (the same functions the prior-grasp filter uses), with the target at its *initial* pose in the world
-  frame; SD's gravity as ``metrics.sd.gravity_direction`` says (away from the palm by default; ``fixed``
-  takes the world-frame vector, -z);
+  frame. The paper's protocol by default: PV voxelises the target's convex parts (``pv_mesh``
+  ``"collision"``: the official code voxelises its decomposed mesh; ``"mesh"``, the watertight mesh), SD's
+  gravity is the official fixed (0, 9.8, 0) m/s^2 of the world frame (``evaluation.sd_gravity``);
+- ``sd_palm`` (m, beyond the paper, with ``palm_sd``): SD again with gravity pulling the target out of the
+  palm (:func:`tohgs.metrics.quality.palm_gravity`), NaN without;
 - ``init_opp`` / ``goal_opp``: the fraction of hand vertices inside the scene meshes (support, shelf,
   obstacles, base brick; never the target) for the hand at the initial pose and for the same hand carried
   to the goal pose;
@@ -31,19 +34,22 @@ import numpy as np
 import pandas as pd
 import trimesh
 
-from tohgs.assets.mesh import object_mesh
+from tohgs.assets.mesh import collision_mesh, object_mesh
 from tohgs.config import settings_from
 from tohgs.data.predictions import read_predictions
 from tohgs.data.scenes import read_scenes
+from tohgs.geometry.grasp import pose_matrix
 from tohgs.geometry.scene import SceneCollider, scene_meshes
 from tohgs.hand.assets import HandAssets
-from tohgs.metrics.quality import DisplacementSimulator, RobustSDSettings, SDSettings, hand_quality, surface_voxels
+from tohgs.metrics.quality import (DisplacementSimulator, RobustSDSettings, SDSettings, SDWorkers, hand_quality,
+                                   palm_gravity, surface_voxels)
 
 log = logging.getLogger(__name__)
 
 COLUMNS = ("task", "method", "object", "config_index", "sample", "pv", "sd", "contact_distance", "init_opp",
-           "goal_opp", "ds", "hand_vertices", "kept", "sd_perturbed")
-OPTIONAL_COLUMNS = ("sd_perturbed",)  # robust SD's; metric rows without it read as having none
+           "goal_opp", "ds", "hand_vertices", "kept", "sd_perturbed", "sd_palm")
+OPTIONAL_COLUMNS = ("sd_perturbed", "sd_palm")  # metric rows without them read as having none (NaN)
+PV_MESHES = ("collision", "mesh")  # the surfaces PV may voxelise (evaluation.pv_mesh)
 
 
 def diversity(vertices: np.ndarray) -> float:
@@ -70,11 +76,16 @@ class _ObjectAssets:
     vertex_mean: np.ndarray
 
 
-def _object_assets(objects_dir: Path, name: str, pitch: float, cache: dict, cache_dir: str | Path | None = None
-                   ) -> _ObjectAssets:
+def _object_assets(objects_dir: Path, name: str, pitch: float, cache: dict, cache_dir: str | Path | None = None,
+                   pv_mesh: str = "collision") -> _ObjectAssets:
+    """The target's mesh, the surface voxels PV counts (of ``pv_mesh``: its convex parts or its mesh),
+    its collision file and vertex mean, loaded once per object into ``cache``."""
+    if pv_mesh not in PV_MESHES:
+        raise ValueError(f"evaluation.pv_mesh must be one of {PV_MESHES}, not {pv_mesh!r}")
     if name not in cache:
         mesh = object_mesh(objects_dir, name)
-        cache[name] = _ObjectAssets(mesh, surface_voxels(mesh, pitch, cache_dir), objects_dir / name / "collision.obj",
+        surface = collision_mesh(objects_dir, name) if pv_mesh == "collision" else mesh
+        cache[name] = _ObjectAssets(mesh, surface_voxels(surface, pitch, cache_dir), objects_dir / name / "collision.obj",
                                     np.asarray(mesh.vertices).mean(0))
     return cache[name]
 
@@ -82,14 +93,15 @@ def _object_assets(objects_dir: Path, name: str, pitch: float, cache: dict, cach
 def grasp_metrics(verts_init: np.ndarray, verts_goal: np.ndarray, faces: np.ndarray, palm_ids: np.ndarray,
                   obj: _ObjectAssets, target_pose: np.ndarray, collider: SceneCollider, pitch: float,
                   sim: DisplacementSimulator, robust: RobustSDSettings | None = None,
-                  robust_rngs: list[np.random.Generator] | None = None) -> dict[str, np.ndarray]:
+                  robust_rngs: list[np.random.Generator] | None = None, palm_sd: bool = False
+                  ) -> dict[str, np.ndarray]:
     """PV, SD, contact distance (:func:`tohgs.metrics.quality.hand_quality`) and both OPPs of S hands of one
-    configuration.
+    configuration; with ``palm_sd`` also ``"sd_palm"``, (S,) SD with gravity out of each palm, m.
 
     Args:
         verts_init, verts_goal: (S, V, 3) world-frame hand vertices at the initial / goal pose, m.
         faces: (F, 3) the hand's closed faces.
-        palm_ids: vertex ids of the palm's contact candidates (SD's ``away_from_palm`` gravity).
+        palm_ids: vertex ids of the palm's contact candidates (the ``away_from_palm`` gravity).
         obj: the target's mesh, surface voxels, collision file and vertex mean (mesh frame).
         target_pose: the target's initial ``[x, y, z, qx, qy, qz, qw]`` pose.
         collider: the scene without the target.
@@ -100,6 +112,11 @@ def grasp_metrics(verts_init: np.ndarray, verts_goal: np.ndarray, faces: np.ndar
     """
     m = hand_quality(verts_init, faces, palm_ids, obj.mesh, obj.voxels, sim, pitch, target_pose,
                      robust=robust, robust_rngs=robust_rngs)
+    if palm_sd:
+        T = pose_matrix(target_pose)
+        centre = T[:3, :3] @ np.asarray(obj.vertex_mean, dtype=np.float64) + T[:3, 3]
+        g = palm_gravity(verts_init[:, palm_ids].mean(1), centre, float(np.linalg.norm(sim.settings.gravity)))
+        m["sd_palm"] = sim.displacements(verts_init, faces, object_pose=target_pose, gravity=g)
     return {**m, "init_opp": occupied_fraction(verts_init, collider), "goal_opp": occupied_fraction(verts_goal, collider)}
 
 
@@ -112,7 +129,8 @@ def grasp_rng(seed: int, obj: str, config_index: int, sample: int) -> np.random.
 def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | Path], objects_dir: str | Path,
                          supports_json: str | Path, hand: HandAssets, sd: dict, voxel_pitch: float = 0.001,
                          cache_dir: str | Path | None = None, progress: bool = False,
-                         robust_sd: dict | None = None) -> pd.DataFrame:
+                         robust_sd: dict | None = None, palm_sd: bool = False, pv_mesh: str = "collision",
+                         threads: int = 1) -> pd.DataFrame:
     """One row per predicted grasp (columns :data:`COLUMNS`) of one task and method.
 
     Args:
@@ -122,13 +140,18 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
         supports_json: the supports file of the objects stage.
         hand: the assets of the hand the predictions are vectors of (posed with
             :meth:`~tohgs.hand.assets.HandAssets.vertices`, so the job does not import torch).
-        sd: a config mapping of :class:`~tohgs.metrics.quality.SDSettings`.
+        sd: a config mapping of :class:`~tohgs.metrics.quality.SDSettings` (the workflow passes
+            ``metrics.sd`` with ``evaluation.sd_gravity``'s direction and vector).
         voxel_pitch: PV's voxel size, m.
         cache_dir: cache root of the objects' surface voxels (the prior grasps' stage fills it).
         progress: show a progress bar over configurations.
         robust_sd: a config mapping of :class:`~tohgs.metrics.quality.RobustSDSettings` (None or
             ``perturbations: 0``: no robust SD). Column ``sd_perturbed`` holds each grasp's K perturbed SDs,
             m (an empty list for a grasp without them).
+        palm_sd: also column ``sd_palm`` (SD with gravity out of the palm; NaN without).
+        pv_mesh: the surface PV voxelises, ``"collision"`` (the paper's protocol) or ``"mesh"``.
+        threads: the job's cores: SD runs in that many worker processes, shared by the objects
+            (:class:`~tohgs.metrics.quality.SDWorkers`; the same numbers as one).
     """
     from tohgs.assets.supports import read_supports
 
@@ -153,6 +176,7 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
 
         it = tqdm(it, desc=f"evaluate {attrs['task']}/{attrs['method']}", mininterval=5.0)
     sims: dict[str, DisplacementSimulator] = {}
+    workers = SDWorkers(threads)
     try:
         for i in it:
             name = vocab[int(arrays["object_id"][i])]
@@ -162,9 +186,9 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
             sc, c = scenes[name], int(arrays["config_index"][i])
             if not 0 <= c < len(sc):
                 raise ValueError(f"{prediction_store}: configuration index {c} of {name!r} is out of range ({len(sc)})")
-            obj = _object_assets(objects_dir, name, voxel_pitch, assets, cache_dir)
+            obj = _object_assets(objects_dir, name, voxel_pitch, assets, cache_dir, pv_mesh)
             if name not in sims:
-                sims[name] = DisplacementSimulator(obj.collision, obj.vertex_mean, s_sd)
+                sims[name] = DisplacementSimulator(obj.collision, obj.vertex_mean, s_sd, workers=workers)
             collider = SceneCollider(scene_meshes(sc, c, objects_dir, supports, meshes))
             kept = np.asarray(arrays["kept"][i], bool)
             m, ds = {}, float("nan")  # DS of a configuration that a filter left fewer than two grasps: none
@@ -173,7 +197,7 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
                 v_goal = hand.vertices(arrays["grasp_goal"][i][kept])
                 rngs = [grasp_rng(robust.seed, name, c, k) for k in np.flatnonzero(kept)]
                 m = grasp_metrics(v_init, v_goal, faces, hand.palm_ids, obj, sc.target_init_pose[c], collider,
-                                  voxel_pitch, sims[name], robust, rngs)
+                                  voxel_pitch, sims[name], robust, rngs, palm_sd)
                 if kept.all() or kept.sum() >= 2:
                     ds = diversity(v_init)
             at = np.cumsum(kept) - 1  # the row of each kept grasp among the metrics
@@ -181,6 +205,7 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
             for k in range(len(kept)):
                 values = ({key: float(val[at[k]]) for key, val in m.items()} if kept[k] else
                           dict.fromkeys(("pv", "sd", "contact_distance", "init_opp", "goal_opp"), float("nan")))
+                values.setdefault("sd_palm", float("nan"))
                 sd_k = perturbed[at[k]] if kept[k] and perturbed is not None else np.zeros(0)
                 rows.append({"task": attrs["task"], "method": attrs["method"], "object": name, "config_index": c,
                              "sample": k, **values, "ds": ds, "hand_vertices": n_vertices, "kept": bool(kept[k]),
@@ -188,5 +213,6 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
     finally:
         for sim in sims.values():
             sim.close()
+        workers.close()
     frame = pd.DataFrame(rows, columns=list(COLUMNS))
     return frame.astype({"config_index": np.int32, "sample": np.int32, "hand_vertices": np.int32, "kept": bool})

@@ -14,14 +14,19 @@ sd_avg/std     simulation displacement, cm
 cr             contact ratio, %: grasps with PV > 0
 qr             quality ratio, %: grasps with PV < ``max_pv`` and SD < ``max_sd`` (3 cm^3, 2 cm)
 ds             diversity: the mean over configurations of their DS, m (summed over hand vertices)
+ds_per_vertex  DS divided by the hand's vertex count, cm: comparable across hands (x 7.78 for MANO's 778)
 init_opp       hand vertices inside the initial scene, %
 goal_opp       hand vertices inside the goal scene, %
 ts             task success ``QR x (1 - InitOPP) x (1 - GoalOPP)`` from the averages
 grasps         grasps evaluated; ``configs``: configurations they came from
+missing        the task's test configurations (those of any row of the table) this row has none of
 discarded      grasps the method discarded (a filter's, F-GraspTTA's): not evaluated, not in the others
 sd_robust      robust SD, cm: the mean over the grasps with perturbed SDs of their median
 sd_pass        %: the mean over those grasps of the fraction of perturbed SDs under ``max_sd``
 sd_unstable    %: those grasps whose verdicts (SD < ``max_sd``: the protocol's and the perturbed) differ
+sd_palm_avg    SD with gravity pulling the object out of the palm, cm (beyond the paper;
+               ``evaluation.palm_sd``)
+qr_palm        QR with that SD, %
 =============  =================================================================================
 
 With several seeds (``seeds``) every cell pools their grasps, and ``qr_seed_sd`` and ``ts_seed_sd`` give the
@@ -36,6 +41,8 @@ cannot be built yet, with the reason: they appear with empty cells (NaN) and the
 
 With a bootstrap (:mod:`tohgs.metrics.bootstrap`), each metric column ``c`` but the counts gets its
 interval as ``c_lo`` and ``c_hi`` in the frame (the CSV); the markdown writes ``value ± half-width``.
+A table's ``paper`` list adds the paper's printed Table 1 value of those metrics as ``paper_<c>`` columns
+(:mod:`tohgs.metrics.paper`), last.
 """
 
 from __future__ import annotations
@@ -47,16 +54,27 @@ import numpy as np
 import pandas as pd
 
 from tohgs.metrics.bootstrap import (INTERVAL_COLUMNS, BootstrapSettings, config_ds, config_keys, config_stats,
-                                     intervals, resample_weights, robust_stats)
+                                     intervals, palm_sd, resample_weights, robust_stats)
+from tohgs.metrics.paper import PAPER_METRICS, paper_value
 
 SEED_SPREAD_COLUMNS = ("qr", "ts")  # the columns whose spread across seeds the tables add
-METRIC_COLUMNS = ("pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "init_opp", "goal_opp", "ts", "grasps",
-                  "configs", "discarded", "sd_robust", "sd_pass", "sd_unstable")
+METRIC_COLUMNS = ("pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "ds_per_vertex", "init_opp", "goal_opp",
+                  "ts", "grasps", "configs", "missing", "discarded", "sd_robust", "sd_pass", "sd_unstable",
+                  "sd_palm_avg", "qr_palm")
+COUNT_COLUMNS = ("grasps", "configs", "missing", "discarded")
 _HEADERS = {"task": "Task", "method": "Method", "pv_avg": "PV avg (cm³)", "pv_std": "PV std", "sd_avg": "SD avg (cm)",
             "sd_std": "SD std", "cr": "CR %", "qr": "QR %", "ds": "DS", "init_opp": "Init OPP %",
-            "goal_opp": "Goal OPP %", "ts": "TS", "grasps": "grasps", "configs": "configs",
+            "goal_opp": "Goal OPP %", "ts": "TS", "grasps": "grasps", "configs": "configs", "missing": "missing",
+            "ds_per_vertex": "DS/vertex (cm)", "sd_palm_avg": "SD palm (cm)", "qr_palm": "QR palm %",
             "discarded": "discarded", "sd_robust": "robust SD (cm)", "sd_pass": "SD pass %",
             "sd_unstable": "SD unstable %", "qr_seed_sd": "QR sd (seeds)", "ts_seed_sd": "TS sd (seeds)"}
+
+
+def _header(column: str) -> str:
+    """A column's markdown header: the paper's value of a metric reads "<header> (paper)"."""
+    if column.startswith("paper_") and column[6:] in PAPER_METRICS:
+        return f"{_HEADERS.get(column[6:], column[6:])} (paper)"
+    return _HEADERS.get(column, column)
 
 
 @dataclass(frozen=True)
@@ -76,9 +94,12 @@ def quality_ratio(frame: pd.DataFrame, t: QualityThresholds) -> float:
     return float(((frame.pv < t.max_pv) & (frame.sd < t.max_sd)).mean() * 100)
 
 
-def summarize(frame: pd.DataFrame, t: QualityThresholds) -> dict[str, float]:
+def summarize(frame: pd.DataFrame, t: QualityThresholds, task_configs: int | None = None) -> dict[str, float]:
     """Every metric column of one task and method's rows: of the kept grasps; NaN where there are no rows,
-    0 where every grasp was discarded (module docstring)."""
+    0 where every grasp was discarded (module docstring). ``missing``: ``task_configs`` (the task's test
+    configurations) less those the rows have (NaN without ``task_configs``)."""
+    present = len(frame[["object", "config_index"]].drop_duplicates()) if len(frame) else 0
+    missing = float("nan") if task_configs is None else float(task_configs - present)
     if "kept" in frame.columns:
         discarded = int((~frame.kept.astype(bool)).sum())
         frame = frame[frame.kept.astype(bool)]
@@ -88,19 +109,25 @@ def summarize(frame: pd.DataFrame, t: QualityThresholds) -> dict[str, float]:
     if n == 0:
         out = {k: float("nan") if discarded == 0 or k.startswith("sd_") and k not in ("sd_avg", "sd_std") else 0.0
                for k in METRIC_COLUMNS}
-        out.update(grasps=0, configs=0, discarded=discarded)
+        out.update(grasps=0, configs=0, discarded=discarded, missing=missing)
         return out
     qr = quality_ratio(frame, t)
     init_opp, goal_opp = float(frame.init_opp.mean()), float(frame.goal_opp.mean())
     ds = config_ds(frame)
     configs = len(frame[["object", "config_index"]].drop_duplicates())
     rob = robust_stats(frame, t.max_sd)
+    sd_palm = palm_sd(frame)
+    has_palm = sd_palm.notna()
+    palm = ({"sd_palm_avg": float(sd_palm[has_palm].mean() * 100),
+             "qr_palm": float(((frame.pv[has_palm] < t.max_pv) & (sd_palm[has_palm] < t.max_sd)).mean() * 100)}
+            if has_palm.any() else dict.fromkeys(("sd_palm_avg", "qr_palm"), float("nan")))
     robust = ({"sd_robust": float(rob.sd_robust.mean() * 100), "sd_pass": float(rob.sd_pass.mean() * 100),
                "sd_unstable": float(rob.sd_unstable.mean() * 100)} if len(rob) else
               dict.fromkeys(("sd_robust", "sd_pass", "sd_unstable"), float("nan")))
-    return {**robust, "pv_avg": float(frame.pv.mean() * 1e6), "pv_std": float(frame.pv.std(ddof=0) * 1e6),
+    return {**robust, **palm, "pv_avg": float(frame.pv.mean() * 1e6), "pv_std": float(frame.pv.std(ddof=0) * 1e6),
             "sd_avg": float(frame.sd.mean() * 100), "sd_std": float(frame.sd.std(ddof=0) * 100),
             "cr": float((frame.pv > 0).mean() * 100), "qr": qr, "ds": float(ds.mean()),
+            "ds_per_vertex": float(config_ds(frame, per_vertex=True).mean() * 100), "missing": missing,
             "init_opp": init_opp * 100, "goal_opp": goal_opp * 100,
             "ts": qr / 100 * (1 - init_opp) * (1 - goal_opp), "grasps": n, "configs": configs, "discarded": discarded}
 
@@ -140,9 +167,11 @@ def seed_spread(frame: pd.DataFrame, t: QualityThresholds, columns: list[str]) -
 
 def metric_table(rows: pd.DataFrame, tasks: list[str], methods: list[str], labels: dict[str, str],
                  columns: list[str], t: QualityThresholds, pending: list[str] = (),
-                 bootstrap: BootstrapSettings | None = None) -> pd.DataFrame:
+                 bootstrap: BootstrapSettings | None = None, paper: list[str] = ()) -> pd.DataFrame:
     """One row per task and method, in the given orders: ``task``, ``method`` (its label) and ``columns``;
-    then per task a row of NaN for each label of ``pending`` (methods not available yet). With a
+    then per task a row of NaN for each label of ``pending`` (methods not available yet); last, for each
+    of ``paper``, the paper's Table 1 value ``paper_<c>`` of the row's method (:mod:`tohgs.metrics.paper`;
+    NaN for a method the paper does not have). With a
     ``bootstrap`` of samples > 0, the intervals ``<c>_lo``, ``<c>_hi`` of the columns that have them; the
     resamples are drawn once per task, over every configuration of the task's rows, and shared by its
     methods. Rows of several seeds (column ``seed``, :func:`read_metrics`) are pooled, and QR's and TS's
@@ -155,16 +184,18 @@ def metric_table(rows: pd.DataFrame, tasks: list[str], methods: list[str], label
     several = "seed" in rows.columns and rows.seed.nunique() > 1
     spread = [c for c in columns if c in SEED_SPREAD_COLUMNS] if several else []
     bounds += [f"{c}_seed_sd" for c in spread]
+    bounds += [f"paper_{c}" for c in paper]
     out = []
     for task in tasks:
         in_task = rows[rows.task == task]
+        n_configs = len(config_keys(in_task[in_task.method.isin(methods)]))
         if ci:
             keys = config_keys(in_task)
             rng = np.random.default_rng([bootstrap.seed, tasks.index(task)])
             weights = resample_weights(keys.object.to_numpy(), bootstrap.samples, rng)
         for m in methods:
             sel = in_task[in_task.method == m]
-            summary = summarize(sel, t)
+            summary = summarize(sel, t, n_configs)
             row = {"task": task, "method": labels.get(m, m), **{c: summary[c] for c in columns}}
             if ci:
                 iv = intervals(weights, config_stats(sel, keys, t.max_pv, t.max_sd), bootstrap.level)
@@ -172,6 +203,7 @@ def metric_table(rows: pd.DataFrame, tasks: list[str], methods: list[str], label
                     row[f"{c}_lo"], row[f"{c}_hi"] = iv[c]
             if spread:
                 row.update({f"{c}_seed_sd": v for c, v in seed_spread(sel, t, spread).items()})
+            row.update({f"paper_{c}": paper_value(m, task, c) for c in paper})
             out.append(row)
         out += [{"task": task, "method": label, **dict.fromkeys([*columns, *bounds], float("nan"))} for label in pending]
     return pd.DataFrame(out, columns=["task", "method", *columns, *bounds])
@@ -198,15 +230,15 @@ def markdown(table: pd.DataFrame, digits: int = 3, notes: dict[str, str] | None 
     notes = notes or {}
     marks = {label: "*" * (k + 1) for k, label in enumerate(notes)}
     cols = [c for c in table.columns if not (c.endswith(("_lo", "_hi")) and c[:-3] in table.columns)]
-    lines = ["| " + " | ".join(_HEADERS.get(c, c) for c in cols) + " |", "|" + "---|" * len(cols)]
+    lines = ["| " + " | ".join(_header(c) for c in cols) + " |", "|" + "---|" * len(cols)]
     for _, r in table.iterrows():
         cells = []
         for c in cols:
             v = r[c]
-            if c in ("grasps", "configs", "discarded"):
+            if c in COUNT_COLUMNS:
                 cells.append(str(int(v)) if np.isfinite(v) else "–")
             elif isinstance(v, (float, np.floating)):
-                fmt = f".{digits}f" if c in ("ts", "ds", "ts_seed_sd") else ".2f"
+                fmt = f".{digits}f" if c in ("ts", "ds", "ts_seed_sd", "paper_ts") else ".2f"
                 text = "–" if not np.isfinite(v) else format(v, fmt)
                 if np.isfinite(v) and f"{c}_lo" in table.columns and np.isfinite(r[f"{c}_lo"]):
                     text += " ± " + format((r[f"{c}_hi"] - r[f"{c}_lo"]) / 2, fmt)

@@ -69,11 +69,19 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     return obj
 
 
-def load_component(path: str | Path, device: str | torch.device = "cpu") -> tuple[Component, dict[str, Any]]:
+def load_component(path: str | Path, device: str | torch.device = "cpu", task: str | None = None,
+                   component: str | None = None) -> tuple[Component, dict[str, Any]]:
     """The component of a checkpoint (EMA weights, eval mode) and the checkpoint dict.
 
+    Args:
+        path: the checkpoint.
+        device: where the weights go.
+        task, component: what the job expects (None: not checked); a checkpoint that records another task
+            or component (one copied into place) is refused.
+
     Raises:
-        ValueError: not a tohgs checkpoint, one of another format version, or one without a required key.
+        ValueError: not a tohgs checkpoint, one of another format version, one without a required key, or one
+            of another task or component than the job's (the message names the file and both).
     """
     path = Path(path)
     ckpt = load_checkpoint(path)
@@ -85,6 +93,10 @@ def load_component(path: str | Path, device: str | torch.device = "cpu") -> tupl
     missing = [k for k in REQUIRED if k not in ckpt]
     if missing:
         raise ValueError(f"{path}: not a tohgs checkpoint (no {missing})")
+    for key, want in (("task", task), ("component", component)):
+        if want is not None and ckpt[key] != want:
+            raise ValueError(f"{path}: a checkpoint of {key} {ckpt[key]!r}, but this job needs {key} {want!r} (a file "
+                             "copied into place? retrain it: delete the file)")
     model = build_component(ckpt["kind"], ckpt["network_config"])
     model.load_state_dict(ckpt["state_dict"])
     return model.to(device).eval(), ckpt

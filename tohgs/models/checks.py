@@ -240,7 +240,7 @@ def model_checks(task: str, shard_paths: list[str | Path], checkpoints: dict[str
     result: dict = {"task": task}
     plain = MapDataset(shard_paths, per="grasp", rotation="none")
     for name, ckpt in checkpoints.items():
-        model, meta = load_component(ckpt)
+        model, meta = load_component(ckpt, task=task, component=name)
         if model.kind not in CHECKED_KINDS:
             result[name] = {"kind": model.kind, "checks": "none for this kind"}
             continue

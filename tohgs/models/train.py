@@ -44,7 +44,7 @@ class TrainSettings:
     weight_decay: float = 1e-5
     warmup: int = 100
     ema_decay: float = 0.995
-    rotation: str = "z"
+    rotation: str = "so3"
     checkpoint_every: int = 250
     log_every: int = 50
     seed: int = 0

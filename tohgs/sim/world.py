@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pybullet as pb
 
+from tohgs.assets.manifest import check_object_urdf
 from tohgs.assets.supports import Support
 from tohgs.sim.client import DirectClient
 
@@ -77,7 +78,10 @@ class World(DirectClient):
 
     def add_object(self, urdf: str | Path, pose: np.ndarray, static: bool = False,
                    color: tuple[float, float, float, float] | None = None) -> int:
-        """Load an object's URDF (collision = its convex decomposition) at ``pose``; ``static`` makes it fixed."""
+        """Load an object's URDF (collision = its convex decomposition) at ``pose``; ``static`` makes it fixed.
+        The URDF and its folder's files are checked against their checksums first
+        (:func:`tohgs.assets.manifest.check_object_urdf`: ``ValueError`` naming a damaged file)."""
+        check_object_urdf(urdf)
         body = pb.loadURDF(str(urdf), basePosition=pose[:3], baseOrientation=pose[3:], useFixedBase=static,
                            flags=pb.URDF_USE_INERTIA_FROM_FILE, physicsClientId=self.cid)
         pb.changeDynamics(body, -1, lateralFriction=self.settings.friction, rollingFriction=0.0005,

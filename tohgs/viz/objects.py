@@ -46,7 +46,7 @@ def plot_objects(catalog_csv: str | Path, out_png: str | Path, max_objects: int 
         set_equal(ax, mesh.vertices, radius=radius)
         ext = 100 * np.array([row.extent_x, row.extent_y, row.extent_z])
         ax.set_title(f"{row.name}\n{row.split} {ext[0]:.0f}x{ext[1]:.0f}x{ext[2]:.0f} cm", fontsize=7)
-    lines = [f"rejected {r.name}: {r.reason}" for r in rejected.itertuples()]
+    lines = [f"{r.status} {r.name or r.source_path}: {r.reason}" for r in rejected.itertuples()]
     legend = f"colour = split: train blue, val green, test orange; every panel spans {200 * radius:.0f} cm"
     fig.text(0.01, 0.005, "\n".join([legend] + lines), fontsize=7, va="bottom", family="monospace")
     fig.tight_layout(rect=(0, 0.03 + 0.012 * len(lines), 1, 1))

@@ -58,7 +58,7 @@ else:
     try:
         OBJECTS = {spec.name: spec for spec in select_objects(config["objects"], config["seed"], skipped=SKIPPED_FILES)}
         check_split_sizes(Counter(spec.task_set for spec in OBJECTS.values()), config["objects"]["split"], TASK_SETS)
-    except (ValueError, FileNotFoundError) as err:
+    except (ValueError, FileNotFoundError, ModuleNotFoundError) as err:
         raise WorkflowError(f"invalid configuration: {err}") from None
 for _file, _reason in SKIPPED_FILES:
     print(f"objects.sources.dir: skipped {_file}: {_reason}", file=sys.stderr)
@@ -69,7 +69,7 @@ def imported(path):
     return os.path.join(OFFICIAL, path)
 
 
-OBJECT_NAME = "(pb|brick|dir|off)-[a-z0-9-]+"  # the {object} wildcard (tohgs.assets.sources, tohgs.data.official)
+OBJECT_NAME = "(pb|brick|dir|ycb|off)-[a-z0-9-]+"  # the {object} wildcard (tohgs.assets.sources, tohgs.data.official)
 
 
 def objects_dir_of_supports(wildcards, input):
@@ -247,6 +247,10 @@ def all_map_shards(wildcards):
     return [p for task in config["scenes"]["tasks"] for p in map_shards_of(task)]
 
 
+def all_scene_stores(wildcards):
+    return [p for task in config["scenes"]["tasks"] for p in scene_stores_of(task)]
+
+
 def all_task_grasps(wildcards):
     return [f"results/grasps/task/{task}/{o}.zarr" for task in config["scenes"]["tasks"] for o in task_targets(task)]
 
@@ -364,6 +368,13 @@ def rule_resources(name):
     if name in TORCH_RULES and config["resources"]["gpu"]:
         r.update(gpu=1, gpu_manufacturer=config["resources"]["gpu_manufacturer"])
     return r
+
+
+def evaluation_sd_settings():
+    """SD's settings in the evaluation: the physics of ``metrics.sd`` with the gravity of
+    ``evaluation.sd_gravity`` (the prior grasps keep ``metrics.sd``'s own)."""
+    g = config["evaluation"]["sd_gravity"]
+    return _canonical({**config["metrics"]["sd"], "gravity_direction": g["direction"], "gravity": g["vector"]})
 
 
 def robust_sd_settings(wildcards):

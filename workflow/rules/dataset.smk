@@ -34,11 +34,16 @@ rule maps:
 rule dataset_summary:
     input:
         task_grasps=all_task_grasps,
+        scenes=all_scene_stores,
         shards=all_map_shards,
+        objects=object_dirs(),
+        supports="results/objects/supports",
     output:
         "results/maps/summary.csv",
     params:
         code=code("dataset_summary.py"),
+        objects_dir=objects_dir_of_supports,
+        seed=setting("seed"),
     conda:
         "../envs/tohgs.yaml"
     log:

@@ -14,10 +14,12 @@ rule evaluate:
     params:
         code=code("evaluate.py"),
         objects_dir=objects_dir_of_supports,
-        sd=setting("metrics", "sd"),
+        sd=evaluation_sd_settings(),
         voxel_pitch=setting("metrics", "voxel_pitch"),
         cache_dir=setting("cache_dir"),
         robust_sd=robust_sd_settings,
+        palm_sd=setting("evaluation", "palm_sd"),
+        pv_mesh=setting("evaluation", "pv_mesh"),
     threads: config["evaluation"]["threads"]
     resources:
         **rule_resources("evaluate"),
@@ -45,6 +47,7 @@ rule table:
         labels=lambda w: {m: TABLES[w.table]["labels"].get(m, METHODS[m]["label"]) for m in TABLES[w.table]["rows"]},
         pending=lambda w: setting("tables", w.table, "pending"),
         columns=lambda w: setting("tables", w.table, "columns"),
+        paper=lambda w: setting("tables", w.table, "paper"),
         replicas=lambda w: replicas_of(TABLES[w.table]["rows"]),
         qr=setting("evaluation", "qr"),
         qr_grid=setting("evaluation", "qr_grid"),

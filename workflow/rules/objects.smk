@@ -13,6 +13,7 @@ rule prepare_object:
         size=object_size,
         density=setting("objects", "density"),
         decomposition=setting("objects", "decomposition"),
+        limits=setting("objects", "limits"),
         cache_dir=setting("cache_dir"),
     resources:
         **rule_resources("prepare_object"),
@@ -37,6 +38,7 @@ checkpoint catalog:
         split=setting("objects", "split"),
         seed=setting("seed"),
         task_sets=TASK_SETS,
+        skipped=[list(s) for s in SKIPPED_FILES],  # user-folder files that are no objects, with the reason
     priority: PRIORITY["data"]
     conda:
         "../envs/tohgs.yaml"

@@ -6,4 +6,4 @@ setup_logging(snakemake.log[0])
 from tohgs.assets.objects import write_catalog  # noqa: E402
 
 write_catalog(snakemake.input.objects, snakemake.params.split, snakemake.params.seed, snakemake.output[0],
-              task_sets=snakemake.params.task_sets)
+              task_sets=snakemake.params.task_sets, skipped=snakemake.params.skipped)

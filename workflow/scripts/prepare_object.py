@@ -15,4 +15,5 @@ prepare_object(
     density=snakemake.params.density,
     seed=size.get("seed", 0),
     cache_dir=snakemake.params.cache_dir,
+    limits=snakemake.params.limits,
 )

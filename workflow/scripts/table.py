@@ -13,7 +13,7 @@ p, out = snakemake.params, snakemake.output
 rows = read_metrics(snakemake.input.metrics, p.replicas)
 pending = {row["label"]: row["reason"] for row in p.pending}
 table = metric_table(rows, p.tasks, p.rows, p.labels, p.columns, QualityThresholds(**p.qr), list(pending),
-                     BootstrapSettings(**p.bootstrap))
+                     BootstrapSettings(**p.bootstrap), p.paper)
 grid = qr_grid(rows, p.tasks, p.rows, p.labels, p.qr_grid["max_pv"], p.qr_grid["max_sd"])
 with atomic_path(out.csv) as tmp:
     table.to_csv(tmp, index=False, float_format="%.6g")
