@@ -17,6 +17,7 @@ from tohgs.config import (ConfigError, add_seed_replicas, drop_ground_truth_rows
                           settings_from, validate_config)
 from tohgs.assets.objects import check_split_sizes, read_catalog
 from tohgs.assets.sources import select_objects, task_set
+from tohgs.grasps.filter import SCREEN_KEYS
 from tohgs.data.official import read_import
 from tohgs.methods import method_components
 from tohgs.models import CHECKED_KINDS
@@ -196,6 +197,13 @@ def prior_stores(wildcards):
     """The filtered prior-grasp store of every accepted object (objects and bricks)."""
     catalog = catalog_frame()
     return expand("results/grasps/prior/{object}.zarr", object=sorted(catalog.name))
+
+
+def prior_screen(wildcards):
+    """The filter thresholds that screen the grasps before SD (prior_grasps.simulate: screened), or None."""
+    if config["prior_grasps"]["simulate"] != "screened":
+        return None
+    return {k: config["prior_grasps"]["filter"][k] for k in SCREEN_KEYS}
 
 
 def plane_direction(wildcards):
