@@ -170,6 +170,14 @@ def test_reference_grasps_evaluate_collision_free_at_both_poses(built, tmp_path)
     assert (rows.init_opp == 0).all() and (rows.goal_opp == 0).all()
     assert (rows.pv == 0).all() and (rows.contact_distance > 0).all()  # 5 mm above the top face
     assert (rows.hand_vertices == hand.rest_vertices.shape[0]).all()
+    # two cores: SD (and robust SD) in two worker processes, the same rows
+    robust = {"perturbations": 2, "grasps_per_config": 2}
+    one, two = (evaluate_predictions(tmp_path / "dataset.zarr", [tmp / "scenes/brick-cube.zarr"], tmp / "objects",
+                                     tmp / "objects/supports/supports.json", hand.assets, {"gravity_direction": "fixed"},
+                                     robust_sd=robust, palm_sd=True, threads=threads) for threads in (1, 2))
+    pd.testing.assert_frame_equal(one, two)
+    assert one.sd_perturbed.map(len).sum() == sh.n_configs * 2 * 2
+    assert one.sd_palm.notna().all() and rows.sd_palm.isna().all()  # the palm's SD only when asked
 
 
 def test_the_paper_protocol_pulls_along_plus_y_of_the_scene_and_the_palm_column_out_of_the_palm(cube_assets, repo):

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from tohgs.grasps.filter import FilterThresholds, quality_flags, rejection_counts
+import pytest
+
+from tohgs.grasps.filter import FilterThresholds, check_screen, quality_flags, rejection_counts, screen_flags
 
 LIMITS = np.stack([np.full((15, 3), -0.2), np.full((15, 3), 1.5)], -1)
 
@@ -47,3 +49,32 @@ def test_thresholds_are_settings_and_batches_count():
                e_fc=np.zeros(3), e_dis=np.zeros(3), e_pen=np.zeros(3), t=FilterThresholds(max_pv=2e-6))
     assert f["passed"].tolist() == [True, False, False]
     assert rejection_counts(f)["pv"] == 2 and rejection_counts(f)["passed"] == 1
+
+
+def test_the_screen_is_the_energy_and_joint_checks_and_unsimulated_grasps_cannot_pass():
+    rng = np.random.default_rng(0)
+    b = 200
+    finger = rng.uniform(-0.3, 1.6, (b, 45)) * (rng.random((b, 1)) < 0.5)  # half within the limits
+    args = dict(finger_pose=finger, joint_limits=LIMITS, e_fc=rng.random(b) * 2, e_dis=rng.random(b) * 0.04,
+                e_pen=rng.random(b) * 0.01, t=FilterThresholds(max_fc=1.0, max_dis=0.02, max_pen=0.005))
+    screened = screen_flags(**args)
+    sd = np.where(screened, rng.random(b) * 0.06, np.nan)  # SD simulated for the screened grasps only
+    f = quality_flags(pv=np.zeros(b), sd=sd, contact_distance=np.zeros(b), **args)
+    np.testing.assert_array_equal(screened, f["energy"] & f["joints"])
+    assert 20 < screened.sum() < 180
+    assert not f["sd"][~screened].any() and not f["passed"][~screened].any()
+    counts = rejection_counts(f, np.isfinite(sd))
+    assert counts["unsimulated"] == (~screened).sum()
+    assert counts["sd"] == (screened & (sd >= 0.03)).sum()  # SD failures among the simulated grasps only
+    assert rejection_counts(f)["sd"] == (~f["sd"]).sum()  # without the mask: every grasp not shown stable
+
+
+def test_filter_thresholds_looser_than_the_screen_are_refused():
+    screen = {"max_fc": 1.0, "max_dis": 0.02, "max_pen": 0.005, "joint_tolerance": 0.0}
+    check_screen(screen, FilterThresholds(max_fc=1.0, max_dis=0.02, max_pen=0.005, max_sd=0.05, max_pv=1e-5), "raw.zarr")
+    check_screen(screen, FilterThresholds(max_fc=0.3, max_dis=0.005, max_pen=0.001), "raw.zarr")  # tighter
+    check_screen(None, FilterThresholds(max_fc=9.0), "raw.zarr")  # every grasp was simulated
+    with pytest.raises(ValueError, match=r"raw.zarr: SD was simulated only .* max_dis 0.03 > 0.02"):
+        check_screen(screen, FilterThresholds(max_fc=1.0, max_dis=0.03, max_pen=0.005), "raw.zarr")
+    with pytest.raises(ValueError, match=r"joint_tolerance 0.1 > 0.0"):
+        check_screen(screen, FilterThresholds(max_fc=1.0, max_dis=0.02, max_pen=0.005, joint_tolerance=0.1), "raw.zarr")

@@ -209,8 +209,10 @@ def test_grasptta_predicts_adapted_grasps_and_f_grasptta_filters_them(tta_models
     models = {k: paths[k] for k in ("grasp_cvae", "contact_net")}
     settings = {"samples": 4, "seed": 0, "device": "cpu", "tta": {"steps": 10}}
     a = predict("placing", "grasptta", GRASPTTA, [tmp / "shard-0.zarr"], models, settings, out / "a.zarr", hand=hand_file)
-    again = predict("placing", "grasptta", GRASPTTA, [tmp / "shard-0.zarr"], models, settings, out / "b.zarr", hand=hand_file)
+    again = predict("placing", "grasptta", GRASPTTA, [tmp / "shard-0.zarr"], models, {**settings, "chunk": 1},
+                    out / "b.zarr", hand=hand_file)  # one configuration at a time: the same grasps as a chunk
     np.testing.assert_array_equal(a["grasp_init"], again["grasp_init"])
+    np.testing.assert_array_equal(a["contact"], again["contact"])
     arrays, attrs = read_predictions(out / "a.zarr")
     assert arrays["kept"].all() and attrs["discarded"] == 0
     assert attrs["timing"]["seconds_per_adaptation"] > 0

@@ -177,6 +177,20 @@ def test_shared_shape_fast_path_equals_the_general_path(hand):
     assert a.vertices.transpose(1, 2).is_contiguous()  # coordinate-major: the optimiser's per-axis work streams
 
 
+def test_skinning_rows_give_the_forward_pass_and_any_vertex_subset(hand, mano_hand):
+    pose = _random_pose(7, 11)
+    rows, joints16 = hand.skinning_rows(pose)
+    out = hand(pose)
+    v = (rows.reshape(-1, 65) @ hand.skin_rest_t).reshape(7, 3, -1).transpose(1, 2)
+    assert torch.equal(v, out.vertices) and torch.equal(joints16, out.joints[:, :16])  # the same GEMM
+    ids = torch.tensor([0, 5, 77, hand.n_vertices - 1])
+    sub = (rows.reshape(-1, 65) @ hand.skin_rest_t[:, ids]).reshape(7, 3, -1).transpose(1, 2)
+    torch.testing.assert_close(sub, out.vertices[:, ids], atol=1e-12, rtol=0)
+    assert hand.linear_skinning and not mano_hand.linear_skinning
+    with pytest.raises(ValueError, match="pose blend shapes"):
+        mano_hand.skinning_rows(pose)
+
+
 @pytest.mark.parametrize("which", ["hand", "mano_hand"])
 def test_numpy_vertices_equal_the_torch_model(which, request):
     """HandAssets.vertices (torch-free jobs) poses the mesh exactly like HandModel, MANO's pose blend

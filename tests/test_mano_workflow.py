@@ -36,7 +36,8 @@ pytestmark = pytest.mark.slow
 MANO_CONFIG = {
     "hand": {"model": "mano", "mano_path": None},
     "scenes": {"tasks": ["placing"], "n_configs": 2},
-    "objects": {"sources": {"pybullet_data": {"random_urdfs": 3, "named": 0}, "bricks": {"count": 0}}},
+    "objects": {"sources": {"pybullet_data": {"random_urdfs": 3, "named": 0}, "bricks": {"count": 0},
+                            "ycb": {"count": 0}}},
     "prior_grasps": {"synthesis": {"batch": 32}},
     "components": {"contact_diffuser": {"training": {"steps": 60}},
                    "grasp_diffuser": {"training": {"steps": 100}}},

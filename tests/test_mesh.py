@@ -67,6 +67,37 @@ def test_a_random_urdfs_object_is_repaired_into_one_solid():
     assert repairs
 
 
+def test_stray_open_fragment_is_dropped():
+    """A scanned mesh's isolated single triangle (the YCB meshes carry some) is dropped, not a rejection."""
+    box = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
+    stray = trimesh.Trimesh([[0.2, 0, 0], [0.2001, 0, 0], [0.2, 0.0001, 0]], [[0, 1, 2]], process=False)
+    fixed, repairs = repair_and_validate(trimesh.util.concatenate([box, stray]))
+    assert len(fixed.split(only_watertight=False)) == 1
+    assert fixed.volume == pytest.approx(1e-3, rel=1e-6)
+    assert any(r.startswith("dropped 1 stray open fragment") for r in repairs)
+    assert not any("fused" in r for r in repairs)
+
+
+def test_stray_fragment_dropped_before_touching_bodies_are_fused():
+    a = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
+    b = trimesh.creation.box(extents=(0.1, 0.06, 0.06))
+    b.apply_translation((0.1, 0.0, 0.0))
+    stray = trimesh.Trimesh([[0.4, 0, 0], [0.4001, 0, 0], [0.4, 0.0001, 0]], [[0, 1, 2]], process=False)
+    fixed, repairs = repair_and_validate(trimesh.util.concatenate([a, b, stray]))
+    assert fixed.volume == pytest.approx(1.36e-3, rel=0.01)
+    assert any("stray" in r for r in repairs) and "fused 2 bodies" in repairs
+
+
+def test_large_open_body_beside_a_solid_is_still_rejected():
+    """Only fragments below STRAY_AREA_FRACTION of the surface are dropped: an open sheet as large as a
+    face of the box rejects the mesh."""
+    box = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
+    sheet = trimesh.Trimesh([[0.3, 0, 0], [0.4, 0, 0], [0.3, 0.1, 0], [0.4, 0.1, 0]], [[0, 1, 2], [1, 3, 2]],
+                            process=False)
+    with pytest.raises(MeshError, match="not watertight; cannot fuse"):
+        repair_and_validate(trimesh.util.concatenate([box, sheet]))
+
+
 def test_separate_bodies_are_rejected():
     a = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
     b = a.copy()

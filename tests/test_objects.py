@@ -91,3 +91,25 @@ def test_catalog_from_folders(tmp_path):
     assert sorted(ok.split) == ["test", "train"]
     with pytest.raises(FileNotFoundError, match="meta.json"):
         write_catalog([tmp_path / "nowhere"], split, 0, tmp_path / "c.csv")
+
+
+def test_a_ycb_object_goes_through_the_objects_stage(tmp_path):
+    """The YCB tuna can carries two stray single triangles: dropped, then rescaled into the graspable range,
+    decomposed, and loadable by PyBullet with its mass."""
+    from tohgs.assets.sources import ycb_candidates
+
+    spec = ycb_candidates(["007_tuna_fish_can"])[0]
+    assert spec.name == "ycb-007-tuna-fish-can"
+    meta = _prepare(spec, tmp_path / spec.name, None)
+    assert meta["status"] == "ok", meta["reason"]
+    assert any(r.startswith("dropped 2 stray open fragments") for r in meta["repairs"])
+    ext = np.sort(meta["extents"])
+    assert CFG["size"]["longest_min"] - 1e-9 <= ext[2] <= CFG["size"]["longest_max"] + 1e-9
+    assert CFG["size"]["thickness_min"] - 1e-9 <= ext[0] <= CFG["size"]["thickness_max"] + 1e-9
+    assert meta["n_collision_parts"] >= 1 and meta["watertight"]
+    cid = p.connect(p.DIRECT)
+    try:
+        body = p.loadURDF(str(tmp_path / spec.name / "object.urdf"), physicsClientId=cid)
+        assert p.getDynamicsInfo(body, -1, physicsClientId=cid)[0] == pytest.approx(meta["mass"], rel=1e-6)
+    finally:
+        p.disconnect(cid)

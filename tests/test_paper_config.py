@@ -108,7 +108,7 @@ def _with_bases(names: list[str], methods: dict) -> list[str]:
 def _expected(cfg: dict) -> dict[str, dict[str, int]]:
     """Each rule's job count before and after the checkpoint, from the config's values alone."""
     src = cfg["objects"]["sources"]
-    n_objects = src["pybullet_data"]["random_urdfs"] + src["pybullet_data"]["named"]
+    n_objects = src["pybullet_data"]["random_urdfs"] + src["pybullet_data"]["named"] + src["ycb"]["count"]
     n_bricks = src["bricks"]["count"]
     assert src["dir"]["path"] is None  # a user folder would add its files
     tasks = cfg["scenes"]["tasks"]

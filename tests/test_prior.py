@@ -83,7 +83,8 @@ def test_synthesis_and_metrics_of_one_brick(tmp_path):
     cube.convex_hull.export(obj / "collision.obj")
     record_object_files(obj, {"name": "brick-cube"}, ["mesh.obj", "collision.obj"])
     hand = load_hand("anny")
-    syn = {"batch": 6, "iterations": 30, "refine_iterations": 10, "plane_fraction": 0.5}
+    syn = {"batch": 6, "iterations": 30, "refine_iterations": 10, "plane_fraction": 0.5, "step_decay_every": 8,
+           "temperature_decay_every": 2}
     g = make_prior_grasps(obj, hand, "anny", syn, {"spacing": 0.003}, {}, 0.001, "down", 0, tmp_path / "raw.zarr",
                           cache_dir=tmp_path / "cache")
     assert len(g) == 6 and (g.plane[:3, 2] == 1).all() and (g.plane[3:] == 0).all()
@@ -94,4 +95,31 @@ def test_synthesis_and_metrics_of_one_brick(tmp_path):
                               tmp_path / "again.zarr", cache_dir=tmp_path / "cache")
     np.testing.assert_array_equal(again.pose, g.pose)
     np.testing.assert_array_equal(again.sd, g.sd)
+    assert g.attrs["screen"] is None and np.isfinite(g.sd).all()
+    # Screened: SD only for the grasps that pass the energy and joint checks, each measured as without the
+    # screen, so the filter accepts the same grasps. A dis bound at the median splits the batch.
+    screen = {"max_fc": 20.0, "max_dis": float(np.median(g.energies["dis"])), "max_pen": 1.0, "joint_tolerance": 0.0}
+    s = make_prior_grasps(obj, hand, "anny", syn, {"spacing": 0.003}, {}, 0.001, "down", 0, tmp_path / "screened.zarr",
+                          cache_dir=tmp_path / "cache", screen=screen)
+    simulated = np.isfinite(s.sd)
+    assert 0 < simulated.sum() < 6 and s.attrs["screen"] == screen
+    lim = hand.joint_limits.numpy().reshape(45, 2)
+    in_limits = ((g.pose[:, 6:] >= lim[:, 0]) & (g.pose[:, 6:] <= lim[:, 1])).all(1)
+    e = g.energies
+    expect = (e["fc"] < screen["max_fc"]) & (e["dis"] < screen["max_dis"]) & (e["pen"] < screen["max_pen"]) & in_limits
+    np.testing.assert_array_equal(simulated, expect)
+    np.testing.assert_array_equal(s.pose, g.pose)
+    np.testing.assert_array_equal(s.pv, g.pv)
+    np.testing.assert_array_equal(s.contact_distance, g.contact_distance)
+    np.testing.assert_array_equal(s.sd[simulated], g.sd[simulated])
+    loose = {**screen, "max_sd": 0.1, "max_pv": 1e-4}
+    f_all = filter_prior_grasps(tmp_path / "raw.zarr", loose, tmp_path / "f-all.zarr")
+    f_scr = filter_prior_grasps(tmp_path / "screened.zarr", loose, tmp_path / "f-scr.zarr")
+    np.testing.assert_array_equal(f_scr.passed, f_all.passed)
+    assert f_scr.attrs["rejections"]["unsimulated"] == (~simulated).sum()
+    with pytest.raises(ValueError, match="could accept grasps never simulated"):
+        filter_prior_grasps(tmp_path / "screened.zarr", {**loose, "max_fc": 30.0}, tmp_path / "x.zarr")
+    with pytest.raises(ValueError, match="only .* can screen grasps before SD"):
+        make_prior_grasps(obj, hand, "anny", syn, {"spacing": 0.003}, {}, 0.001, "down", 0, tmp_path / "x.zarr",
+                          cache_dir=tmp_path / "cache", screen={**screen, "max_sd": 0.03})
     assert object_seed(0, "brick-cube") != object_seed(0, "brick-arch") != object_seed(1, "brick-arch")

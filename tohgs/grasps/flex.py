@@ -39,9 +39,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from tohgs.geometry.cloud import CloudIndex, clearance_violation, even_subset
+from tohgs.geometry.cloud import (CloudIndex, clearance_violation, cloud_distance, cloud_signed_distance_at,
+                                  even_subset)
 from tohgs.grasps.synthesis import SynthesisSettings, initial_grasps
-from tohgs.grasps.tta import clamp_to_limits
+from tohgs.grasps.tta import by_problem, clamp_to_limits, pose_problems
 from tohgs.hand.layout import FINGERS
 from tohgs.hand.model import HandModel
 
@@ -90,42 +91,70 @@ def contact_groups(hand: HandModel) -> torch.Tensor:
 
 
 class FlexProblem:
-    """One configuration's energy (module docstring) for (B, 51) grasps; the nearest cloud points are
-    kept per candidate between searches (:meth:`energy` with ``search``)."""
+    """The energy (module docstring) of the candidates of C configurations: (C, N, 3) object clouds and
+    normals, (C, M, 3) scene clouds and normals, (C, 4, 4) goal transforms (one configuration's arrays
+    without the leading axis are taken as C = 1). The (B, 51) grasps it is given are the configurations'
+    candidates in order, B / C each (every configuration keeps as many). Each cloud has its own
+    :class:`tohgs.geometry.cloud.CloudIndex`; the nearest cloud points are kept per candidate between
+    searches (:meth:`energy` with ``search``). Every term is per candidate, so a candidate's energy does
+    not depend on the other candidates or configurations."""
 
     def __init__(self, hand: HandModel, points: torch.Tensor, normals: torch.Tensor, scene: torch.Tensor,
                  scene_normals: torch.Tensor, goal_transform: torch.Tensor, settings: FlexSettings):
+        if points.ndim == 2:
+            points, normals, scene, scene_normals, goal_transform = (
+                x[None] for x in (points, normals, scene, scene_normals, goal_transform))
         self.hand, self.s = hand, settings
-        self.object = CloudIndex(points, normals)
-        self.scene = CloudIndex(scene, scene_normals)
+        self.n_configs = len(points)
+        self.objects = [CloudIndex(p, n) for p, n in zip(points, normals)]
+        self.scenes = [CloudIndex(p, n) for p, n in zip(scene, scene_normals)]
+        # every configuration's cloud end to end: a candidate's kept index points into its own block
+        self.object_flat = (points.reshape(-1, 3), normals.reshape(-1, 3))
+        self.scene_flat = (scene.reshape(-1, 3), scene_normals.reshape(-1, 3))
         self.goal = goal_transform
         self.sub = even_subset(hand.rest_vertices.shape[0], settings.hand_points, points.device)
         self.groups = contact_groups(hand)
         self.kept: dict[str, torch.Tensor] = {}
 
     def select(self, keep: torch.Tensor) -> None:
-        """Keep the kept correspondences of the (B',) candidates ``keep`` only."""
+        """Keep the kept correspondences of the (B',) candidates ``keep`` only (B' / C per configuration)."""
         self.kept = {k: v[keep] for k, v in self.kept.items()}
+
+    def _blocks(self, x: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """The (B / C, ...) rows of each configuration of (B, ...) ``x``."""
+        if x.shape[0] % self.n_configs:
+            raise ValueError(f"{x.shape[0]} candidates do not split evenly over {self.n_configs} configurations")
+        return x.split(x.shape[0] // self.n_configs)
+
+    def _nearest(self, indices: list[CloudIndex], query: torch.Tensor) -> torch.Tensor:
+        """(B, Q) each of (B, Q, 3) queries' nearest point in its configuration's cloud, as an index into
+        the clouds end to end."""
+        return torch.cat([idx.nearest(q) + c * len(idx.cloud)
+                          for c, (idx, q) in enumerate(zip(indices, self._blocks(query)))])
+
+    def at_goal(self, pts: torch.Tensor) -> torch.Tensor:
+        """(B, Q, 3) hand points carried by their configuration's goal transform."""
+        return torch.cat([q @ T[:3, :3].T + T[:3, 3] for q, T in zip(self._blocks(pts), self.goal)])
 
     def energy(self, grasp: torch.Tensor, z: torch.Tensor, search: bool = True) -> dict[str, torch.Tensor]:
         """The weighted terms (B,) and their sum ``"energy"`` of (B, 51) grasps with (B, L) latents."""
         s = self.s
-        verts = self.hand(grasp).vertices
+        verts = pose_problems(self.hand, grasp, [grasp.shape[0] // self.n_configs] * self.n_configs).vertices
         sub = verts[:, self.sub]
         cand = verts[:, self.hand.contact_ids]
-        goal = sub @ self.goal[:3, :3].T + self.goal[:3, 3]
+        goal = self.at_goal(sub)
         if search or not self.kept:
-            self.kept = {"object": self.object.nearest(sub), "contact": self.object.nearest(cand),
-                         "init": self.scene.nearest(sub), "goal": self.scene.nearest(goal)}
-        d = self.object.distance(cand, self.kept["contact"])  # (B, C)
+            self.kept = {"object": self._nearest(self.objects, sub), "contact": self._nearest(self.objects, cand),
+                         "init": self._nearest(self.scenes, sub), "goal": self._nearest(self.scenes, goal)}
+        d = cloud_distance(cand, self.object_flat[0], self.kept["contact"])  # (B, C)
         per_group = torch.full((d.shape[0], 6), float("inf"), dtype=d.dtype, device=d.device)
         per_group = per_group.scatter_reduce(1, self.groups.expand_as(d), d, "amin")
         terms = {"fit": s.w_fit * per_group.sum(-1)}
-        so = self.object.signed_distance(sub, self.kept["object"])
+        so = cloud_signed_distance_at(sub, *self.object_flat, self.kept["object"])
         terms["object"] = s.w_object * ((so < 0) & (so > -s.max_depth)).float().mul(-so).sum(-1)
         obstacle = 0
         for key, pts in (("init", sub), ("goal", goal)):
-            ss = self.scene.signed_distance(pts, self.kept[key])
+            ss = cloud_signed_distance_at(pts, *self.scene_flat, self.kept[key])
             obstacle = obstacle + clearance_violation(ss, s.margin, s.max_depth)
         terms["obstacle"] = s.w_obstacle * obstacle
         terms["prior"] = s.w_prior * (z**2).sum(-1)
@@ -134,11 +163,10 @@ class FlexProblem:
     def opp(self, grasp: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(B,) each hand's share of (subset) vertices inside the scene cloud at the initial and the goal pose."""
         with torch.no_grad():
-            sub = self.hand(grasp).vertices[:, self.sub]
-            goal = sub @ self.goal[:3, :3].T + self.goal[:3, 3]
+            sub = pose_problems(self.hand, grasp, [grasp.shape[0] // self.n_configs] * self.n_configs).vertices[:, self.sub]
             out = []
-            for pts in (sub, goal):
-                ss = self.scene.signed_distance(pts, self.scene.nearest(pts))
+            for pts in (sub, self.at_goal(sub)):
+                ss = cloud_signed_distance_at(pts, *self.scene_flat, self._nearest(self.scenes, pts))
                 out.append(((ss < 0) & (ss > -self.s.max_depth)).float().mean(-1))
             return out[0], out[1]
 
@@ -168,12 +196,40 @@ def optimise(hand: HandModel, prior, points: torch.Tensor, normals: torch.Tensor
         start: (B, 51) starting grasps (their finger numbers are ignored: z starts at 0); default
             :func:`start_grasps`.
     """
+    grasp, histories = optimise_many(hand, prior, points[None], normals[None], scene[None], scene_normals[None],
+                                     goal_transform[None], samples, settings, [generator],
+                                     None if start is None else [start])
+    return grasp, histories[0]
+
+
+def optimise_many(hand: HandModel, prior, points: torch.Tensor, normals: torch.Tensor, scene: torch.Tensor,
+                  scene_normals: torch.Tensor, goal_transform: torch.Tensor, samples: int, settings: FlexSettings,
+                  generators: list[torch.Generator], starts: list[torch.Tensor] | None = None
+                  ) -> tuple[torch.Tensor, list[dict[str, list[float]]]]:
+    """:func:`optimise` of C configurations as one batch of C x ``batch`` candidates: (C, N, 3) ``points``
+    and ``normals``, (C, M, 3) ``scene`` and ``scene_normals``, (C, 4, 4) ``goal_transform``, one generator
+    (and start, (B, 51)) per configuration. Each configuration keeps its own candidates: its starts from its
+    generator, its drops (the worse half of its own candidates) and its S best. Every term, each
+    candidate's kept cloud points and Adam are per candidate, so a configuration's grasps do not depend on
+    the others in the batch.
+
+    Returns:
+        (C S, 51) the S best grasps of each configuration in order, and one history per configuration
+        (the mean over its live candidates per step).
+    """
     s = settings
+    n_cfg = len(points)
+    if len(generators) != n_cfg or (starts is not None and len(starts) != n_cfg):
+        raise ValueError(f"{n_cfg} configurations need as many generators (and starts), got {len(generators)}")
     if s.survivors() < samples:
         raise ValueError(f"FLEX keeps {s.survivors()} of {s.batch} candidates after the drops at {list(s.drop_at)}, "
                          f"fewer than the {samples} grasps asked for: raise flex.batch")
     problem = FlexProblem(hand, points, normals, scene, scene_normals, goal_transform, s)
-    g0 = start_grasps(hand, points, s.batch, s, generator) if start is None else start.detach().to(points)
+    if starts is None:
+        starts = [start_grasps(hand, p, s.batch, s, g) for p, g in zip(points, generators)]
+    g0 = torch.cat([st.detach().to(points) for st in starts])
+    if len({len(st) for st in starts}) != 1:
+        raise ValueError("every configuration needs as many starting candidates")
     z = torch.zeros(g0.shape[0], prior.cfg.latent, dtype=points.dtype, device=points.device, requires_grad=True)
     rot = g0[:, 3:6].clone().requires_grad_(True)
     trans = g0[:, :3].clone().requires_grad_(True)
@@ -182,27 +238,32 @@ def optimise(hand: HandModel, prior, points: torch.Tensor, normals: torch.Tensor
     for p in prior.parameters():
         p.requires_grad_(False)
 
-    def grasp_of(z_, rot_, trans_):
-        fingers = prior.decode(z_)
+    def grasp_of(z_, rot_, trans_):  # the prior per configuration: its products' rounding is then the same alone
+        fingers = by_problem(prior.decode, [len(z_) // n_cfg] * n_cfg, z_)
         return clamp_to_limits(torch.cat([trans_, rot_, fingers], -1), hand.joint_limits)
+
+    def rows(order: torch.Tensor, width: int) -> torch.Tensor:
+        """The (C, k) ``order`` (indices within each configuration's ``width`` live candidates) as global rows."""
+        return (order + width * torch.arange(n_cfg, device=order.device)[:, None]).reshape(-1)
 
     best_e = torch.full((g0.shape[0],), float("inf"), dtype=points.dtype, device=points.device)
     best_g = torch.zeros_like(g0)
-    history: dict[str, list[float]] = {}
+    per_step: list[dict[str, torch.Tensor]] = []  # each step's (C, K) terms of the live candidates
     with torch.enable_grad():
         for step in range(s.steps + 1):
             grasp = grasp_of(z, rot, trans)
             terms = problem.energy(grasp, z, search=step % s.search_every == 0)
-            for k, v in terms.items():
-                history.setdefault(k, []).append(float(v.detach().mean()))
+            per_step.append({k: v.detach().reshape(n_cfg, -1) for k, v in terms.items()})
             with torch.no_grad():
                 better = terms["energy"] < best_e
                 best_e = torch.where(better, terms["energy"].detach(), best_e)
                 best_g = torch.where(better[:, None], grasp.detach(), best_g)
             if step == s.steps:
                 break
-            if step in s.drop_at and len(best_e) > samples:  # the worse half (by the current energy) goes
-                keep = terms["energy"].detach().argsort()[:max(samples, len(best_e) // 2)].sort().values
+            live = len(best_e) // n_cfg
+            if step in s.drop_at and live > samples:  # the worse half of each configuration (current energy) goes
+                ranks = terms["energy"].detach().reshape(n_cfg, live).argsort(dim=1, stable=True)
+                keep = rows(ranks[:, :max(samples, live // 2)].sort(dim=1).values, live)
                 z, rot, trans = (p.detach()[keep].requires_grad_(True) for p in (z, rot, trans))
                 state = opt.state_dict()  # the moments of the kept candidates carry over
                 for i, p in enumerate((z, rot, trans)):
@@ -219,5 +280,8 @@ def optimise(hand: HandModel, prior, points: torch.Tensor, normals: torch.Tensor
             opt.zero_grad(set_to_none=True)
             terms["energy"].sum().backward()
             opt.step()
-    order = best_e.argsort()[:samples]
-    return best_g[order], history
+    live = len(best_e) // n_cfg
+    order = rows(best_e.reshape(n_cfg, live).argsort(dim=1, stable=True)[:, :samples], live)
+    histories = [{k: [float(v[c].mean()) for v in (st[k] for st in per_step)] for k in (per_step[0] if per_step else {})}
+                 for c in range(n_cfg)]
+    return best_g[order], histories

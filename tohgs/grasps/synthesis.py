@@ -29,6 +29,12 @@ each contact index resampled with probability ``switch_probability``, and a Metr
 per grasp with a temperature that decays geometrically. DexGraspNet anneals for 6000 iterations; a CPU
 budget of a few hundred needs the same schedule compressed (decays every few steps), followed by a
 polishing phase with the contacts fixed (:func:`_refine`).
+
+The annealing measures E_pen and E_plane on a farthest-point subset of the hand's vertices
+(``anneal_vertices``, a fraction; the contact candidates and fingertips always among them,
+:func:`vertex_subset`): a step's cost is mostly per vertex (the skinning GEMM and its gradient, the SDF
+lower bound), and the annealing only has to find the grasp. The polishing phase and the final energies
+(those the filter reads) use every vertex.
 """
 
 from __future__ import annotations
@@ -51,7 +57,7 @@ class SynthesisSettings:
     decay intervals and the initial distance are set for CPU runs (see the config)."""
 
     batch: int = 64
-    iterations: int = 300
+    iterations: int = 600
     n_contact: int = 4
     w_dis: float = 100.0
     w_pen: float = 100.0
@@ -62,17 +68,18 @@ class SynthesisSettings:
     spen_threshold: float = 0.018
     step_size: float = 0.005
     step_decay: float = 0.95
-    step_decay_every: int = 8
+    step_decay_every: int = 16
     rmsprop_mu: float = 0.98
     switch_probability: float = 0.1
     temperature: float = 18.0
     temperature_decay: float = 0.95
-    temperature_decay_every: int = 2
-    refine_iterations: int = 200
+    temperature_decay_every: int = 4
+    refine_iterations: int = 100
     refine_lr: float = 0.001
     init_distance: tuple[float, float] = (0.01, 0.04)
     init_jitter: float = 0.1
     init_preset: str = "relaxed"
+    anneal_vertices: float = 0.33
     plane_fraction: float = 0.0
     plane_direction: str = "random"  # "random", "stable" (needs rest directions) or "down"
 
@@ -98,7 +105,8 @@ class Energies:
 class SynthesisResult:
     """Optimised grasps of one object: ``pose`` (B, 51), ``contact_idx`` (B, n) into the hand's
     contact candidates, ``planes`` (B, 4) the support planes (zero rows: none), the final
-    :class:`Energies`, and the mean total energy per iteration."""
+    :class:`Energies` (on every hand vertex), and the mean total energy per iteration (the annealing's on
+    its vertex subset)."""
 
     pose: torch.Tensor
     contact_idx: torch.Tensor
@@ -134,11 +142,25 @@ class GraspEnergy:
     """The energy of grasps on one object (its SDF grid), for one hand model."""
 
     def __init__(self, hand: HandModel, sdf: SDFGrid, settings: SynthesisSettings,
-                 planes: torch.Tensor | None = None):
+                 planes: torch.Tensor | None = None, vertex_ids: torch.Tensor | None = None):
         """``planes``: optional (B, 4) support planes ``[nx, ny, nz, offset]`` (keep ``n . v >= offset``);
-        a row with a zero normal means no plane for that grasp."""
+        a row with a zero normal means no plane for that grasp. ``vertex_ids``: optional (S,) increasing
+        hand vertex ids, the only vertices E_pen and E_plane see (:func:`vertex_subset`; it must hold the
+        contact candidates and the fingertips); None: every vertex."""
         self.hand, self.sdf, self.s = hand, sdf, settings
         self.planes = planes
+        self.vertex_ids = vertex_ids
+        if vertex_ids is not None:
+            pos = {int(v): i for i, v in enumerate(vertex_ids.tolist())}
+            missing = sorted({int(v) for v in torch.cat([hand.contact_ids, hand.tip_ids]).tolist()} - set(pos))
+            if missing or not bool((vertex_ids[1:] > vertex_ids[:-1]).all()):
+                raise ValueError("vertex_ids must be increasing and hold every contact candidate and fingertip"
+                                 + (f" (missing {missing[:5]})" if missing else ""))
+            device = hand.contact_ids.device
+            self.contact_pos = torch.tensor([pos[int(v)] for v in hand.contact_ids.tolist()], device=device)
+            self.tip_pos = torch.tensor([pos[int(v)] for v in hand.tip_ids.tolist()], device=device)
+            # The subset's columns of the skinning matrix: its vertices cost a GEMM of their number.
+            self.skin_sub = hand.skin_rest_t[:, vertex_ids].contiguous() if hand.linear_skinning else None
         # The grasps that have a plane (a zero normal means none): only their vertices are tested.
         self.plane_rows = None if planes is None else (planes[:, :3].norm(dim=-1) > 0).nonzero()[:, 0]
         kp = _distal_keypoints()
@@ -163,14 +185,28 @@ class GraspEnergy:
         grad = (d[..., 1:4] - d[..., 4:7]) / (2 * h)
         return d[..., 0], grad / grad.norm(dim=-1, keepdim=True).clamp_min(1e-9)
 
+    def _posed(self, pose: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The (B, 3, S) vertices the energy sees (all, or the subset), coordinate-major, the (B, 21, 3)
+        joints, and the contact candidates' (C,) positions among those vertices; metres."""
+        hand, b = self.hand, pose.shape[0]
+        if self.vertex_ids is None:
+            out = hand(pose)
+            return out.vertices.transpose(1, 2), out.joints, hand.contact_ids  # contiguous (B, 3, V)
+        if self.skin_sub is None:  # pose blend shapes: pose every vertex, keep the subset's
+            out = hand(pose)
+            return out.vertices.transpose(1, 2)[:, :, self.vertex_ids], out.joints, self.contact_pos
+        rows, joints16 = hand.skinning_rows(pose)  # (B, 3, 65), (B, 16, 3)
+        verts_t = (rows.reshape(b * 3, -1) @ self.skin_sub).reshape(b, 3, -1)  # (B, 3, S)
+        tips = verts_t[:, :, self.tip_pos].transpose(1, 2)  # (B, 5, 3)
+        return verts_t, torch.cat([joints16, tips], 1), self.contact_pos
+
     def __call__(self, pose: torch.Tensor, contact_idx: torch.Tensor) -> Energies:
         """Energies of (B, 51) poses with (B, n) contact indices."""
         s, hand = self.s, self.hand
-        out = hand(pose)
-        verts, joints = out.vertices, out.joints
+        verts_t, joints, candidates = self._posed(pose)  # (B, 3, S), (B, 21, 3), (C,)
+        verts = verts_t.transpose(1, 2)  # (B, S, 3) view
         b = pose.shape[0]
-        verts_t = verts.transpose(1, 2)  # (B, 3, V): contiguous from the hand model's fast path
-        cid = hand.contact_ids[contact_idx]  # (B, n) vertex ids
+        cid = candidates[contact_idx]  # (B, n) positions among the vertices
         x = torch.gather(verts_t, 2, cid[:, None, :].expand(-1, 3, -1)).transpose(1, 2)  # (B, n, 3)
         dist_x, normal = self.distance_and_normals(x)
         e_fc = wrench_energy(x, normal)
@@ -283,9 +319,26 @@ def initial_grasps(hand: HandModel, vertices: np.ndarray, settings: SynthesisSet
     return pose, contact
 
 
+def vertex_subset(hand: HandModel, fraction: float) -> torch.Tensor | None:
+    """(S,) increasing ids of about ``fraction`` of the hand's vertices, evenly spread over the rest hand
+    (farthest-point sampling from vertex 0, deterministic), with every contact candidate and fingertip
+    added; None for ``fraction >= 1`` (every vertex)."""
+    if fraction >= 1:
+        return None
+    if fraction <= 0:
+        raise ValueError(f"anneal_vertices must be in (0, 1], not {fraction}")
+    from tohgs.geometry.maps import farthest_point_sampling
+
+    rest = hand.rest_vertices.detach().cpu().numpy()
+    k = max(1, int(round(fraction * len(rest))))
+    ids = np.concatenate([farthest_point_sampling(rest, k), hand.contact_ids.cpu().numpy(), hand.tip_ids.cpu().numpy()])
+    return torch.as_tensor(np.unique(ids), device=hand.contact_ids.device)
+
+
 def synthesize(hand: HandModel, sdf: SDFGrid, vertices: np.ndarray, settings: SynthesisSettings, seed: int,
                progress: bool = False, rest: tuple[np.ndarray, np.ndarray] | None = None) -> SynthesisResult:
-    """Optimise ``settings.batch`` grasps of one object by annealing.
+    """Optimise ``settings.batch`` grasps of one object by annealing (on ``settings.anneal_vertices`` of the
+    hand's vertices), then polishing (on all of them); the returned energies are on every vertex.
 
     Args:
         hand: the hand model (its device is used).
@@ -300,7 +353,9 @@ def synthesize(hand: HandModel, sdf: SDFGrid, vertices: np.ndarray, settings: Sy
     s = settings
     g = torch.Generator().manual_seed(int(seed))
     planes = support_planes(vertices, s, g, rest)
-    energy = GraspEnergy(hand, sdf, s, planes)
+    full = GraspEnergy(hand, sdf, s, planes)
+    subset = vertex_subset(hand, s.anneal_vertices)
+    energy = full if subset is None else GraspEnergy(hand, sdf, s, planes, subset)
     pose, contact = initial_grasps(hand, vertices, s, g, planes)
     pose = pose.detach().requires_grad_(True)
     e = energy(pose, contact)
@@ -332,8 +387,11 @@ def synthesize(hand: HandModel, sdf: SDFGrid, vertices: np.ndarray, settings: Sy
             e = Energies(**{k: torch.where(accept, getattr(new_e, k), getattr(e, k)).detach()
                             for k in e.__dict__})
         history.append(float(e.total.mean()))
+    if subset is not None:  # the energies on every vertex, from here on
+        with torch.no_grad():
+            e = full(pose.detach(), contact).detach()
     if s.refine_iterations > 0:
-        pose, e = _refine(energy, pose.detach(), contact, e, s, history, progress)
+        pose, e = _refine(full, pose.detach(), contact, e, s, history, progress)
     return SynthesisResult(pose.detach(), contact, planes, e.detach(), history)
 
 

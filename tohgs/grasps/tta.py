@@ -36,7 +36,7 @@ import torch
 
 from tohgs.geometry.hand_object import (contact_values, distance_to_vertices, inside_hand, nearest_vertex,
                                        vertex_normals)
-from tohgs.hand.model import HandModel
+from tohgs.hand.model import HandModel, HandOutput
 
 OFFICIAL_POINTS = 3000  # the official code's object points: the point sums are scaled to this many
 
@@ -67,17 +67,51 @@ def clamp_to_limits(grasp: torch.Tensor, limits: torch.Tensor) -> torch.Tensor:
     return torch.cat([grasp[:, :6], torch.maximum(torch.minimum(grasp[:, 6:], lim[:, 1]), lim[:, 0])], -1)
 
 
+def pose_problems(hand: HandModel, grasp: torch.Tensor, sizes: list[int] | None = None) -> HandOutput:
+    """The (B, 51) hands posed problem by problem (consecutive ``sizes`` rows; None: all at once) and put
+    back together. The skinning product's rounding can depend on how many hands it poses at once, so
+    posing each problem's hands alone keeps every vertex bit for bit what it is when the problem is
+    solved alone (the vertices keep the model's layout: a transposed view of (B, 3, V))."""
+    if sizes is None or len(sizes) == 1:
+        return hand(grasp)
+    outs = [hand(g) for g in grasp.split(sizes)]
+    return HandOutput(vertices=torch.cat([o.vertices.transpose(1, 2) for o in outs]).transpose(1, 2),
+                      joints=torch.cat([o.joints for o in outs]), rotations=torch.cat([o.rotations for o in outs]))
+
+
+def by_problem(fn, sizes: list[int] | None, *args):
+    """``fn`` applied to each problem's rows (consecutive ``sizes`` rows of every tensor argument, or of
+    each tensor of a tuple argument) and the results put back together along the first axis (a tuple
+    result element by element). A network's products can round differently on more rows, so running it
+    per problem keeps its output bit for bit what it is when the problem is solved alone."""
+    if sizes is None or len(sizes) == 1:
+        return fn(*args)
+
+    def split(a):
+        if isinstance(a, torch.Tensor):
+            return a.split(sizes)
+        if isinstance(a, tuple):
+            return list(zip(*(x.split(sizes) for x in a)))
+        return [a] * len(sizes)
+
+    outs = [fn(*part) for part in zip(*(split(a) for a in args))]
+    if isinstance(outs[0], tuple):
+        return tuple(torch.cat(parts) for parts in zip(*outs))
+    return torch.cat(outs)
+
+
 def tta_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_net, alpha: float,
-               settings: TTASettings, object_features=None, nearest: torch.Tensor | None = None
-               ) -> dict[str, torch.Tensor]:
+               settings: TTASettings, object_features=None, nearest: torch.Tensor | None = None,
+               sizes: list[int] | None = None) -> dict[str, torch.Tensor]:
     """The three weighted terms and their sum ``"energy"``, each (B,), of (B, 51) grasps on (B, N, 3)
     object points; ``contact_net`` is a :class:`tohgs.models.contact_net.ContactNet` (its
     ``object_features`` of the points may be given: they do not change while the hands move).
 
     ``nearest``: (B, N) each point's kept nearest hand vertex (module docstring); searched when not given.
-    The returned dict holds the one used under ``"nearest"``, without gradient."""
+    The returned dict holds the one used under ``"nearest"``, without gradient. ``sizes``: the hands of
+    each problem when several are solved together (:func:`pose_problems`)."""
     scale = OFFICIAL_POINTS / points.shape[1]
-    verts = hand(grasp).vertices
+    verts = pose_problems(hand, grasp, sizes).vertices
     if nearest is None:
         c_hand, idx = contact_values(points, verts, alpha)
     else:
@@ -85,7 +119,7 @@ def tta_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, conta
         d = distance_to_vertices(points, verts, idx)
         c_hand = 1.0 - 2.0 * (torch.sigmoid(alpha * d) - 0.5)
     with torch.no_grad():
-        c_target = contact_net.predict_map(points, verts, c_hand.detach(), object_features)
+        c_target = by_problem(contact_net.predict_map, sizes, points, verts, c_hand.detach(), object_features)
     consistency = 1e-4 * scale * ((c_hand - c_target) ** 2).sum(-1)
     inside, offset = inside_hand(points, verts, vertex_normals(verts, hand.closed_faces), idx)
     penetration = 120.0 * scale * (inside * (offset**2).sum(-1)).sum(-1)
@@ -107,19 +141,37 @@ def adapt(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_ne
         energy and its terms (one value per step, before the step, with the vertices kept at that step;
         the last after the last step, searched afresh).
     """
+    out, histories = adapt_many(hand, grasp, points, contact_net, alpha, settings, [grasp.shape[0]])
+    return out, histories[0]
+
+
+def adapt_many(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_net, alpha: float,
+               settings: TTASettings, sizes: list[int]) -> tuple[torch.Tensor, list[dict[str, list[float]]]]:
+    """:func:`adapt` of several problems (e.g. the S hands of each of several test configurations, each on
+    its own object) as one batch: the B = sum(``sizes``) hands in order, problem ``p`` the next
+    ``sizes[p]`` rows of ``grasp`` (B, 51) and ``points`` (B, N, 3). Every term is per hand and SGD is
+    per number, so a hand's result does not depend on the others in the batch, bit for bit as the
+    problem's alone: each problem's hands are posed, and ContactNet run, on its rows alone
+    (:func:`pose_problems`, :func:`by_problem`), the rest is per hand.
+
+    Returns:
+        The adapted (B, 51) grasps and one history per problem (the mean over its hands, as :func:`adapt`).
+    """
+    if sum(sizes) != grasp.shape[0] or any(n < 1 for n in sizes):
+        raise ValueError(f"the problem sizes {sizes} must be positive and add up to the {grasp.shape[0]} hands")
     g = clamp_to_limits(grasp.detach().clone(), hand.joint_limits).requires_grad_(True)
     opt = torch.optim.SGD([g], lr=settings.lr, momentum=settings.momentum)
-    history: dict[str, list[float]] = {}
+    per_step: list[dict[str, torch.Tensor]] = []  # each step's (B,) terms, averaged per problem at the end
     with torch.no_grad():
-        features = contact_net.object_features(points)
+        features = by_problem(contact_net.object_features, sizes, points)
     nearest = None
     with torch.enable_grad():
         for step in range(settings.steps + 1):
             search = step % settings.search_every == 0 or step == settings.steps
-            terms = tta_energy(hand, g, points, contact_net, alpha, settings, features, None if search else nearest)
+            terms = tta_energy(hand, g, points, contact_net, alpha, settings, features, None if search else nearest,
+                               sizes)
             nearest = terms.pop("nearest")
-            for k, v in terms.items():
-                history.setdefault(k, []).append(float(v.detach().mean()))
+            per_step.append({k: v.detach() for k, v in terms.items()})
             if step == settings.steps:
                 break
             opt.zero_grad(set_to_none=True)
@@ -127,4 +179,15 @@ def adapt(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_ne
             opt.step()
             with torch.no_grad():
                 g.copy_(clamp_to_limits(g, hand.joint_limits))
-    return g.detach(), history
+    return g.detach(), problem_histories(per_step, sizes)
+
+
+def problem_histories(per_step: list[dict[str, torch.Tensor]], sizes: list[int]) -> list[dict[str, list[float]]]:
+    """Per problem (consecutive ``sizes`` rows of the B hands), the mean of each recorded (B,) term at each
+    step that recorded it."""
+    keys = list(dict.fromkeys(k for step in per_step for k in step))  # in order of appearance
+    out, start = [], 0
+    for n in sizes:
+        out.append({k: [float(step[k][start:start + n].mean()) for step in per_step if k in step] for k in keys})
+        start += n
+    return out

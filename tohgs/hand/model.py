@@ -127,18 +127,17 @@ class HandModel(torch.nn.Module):
         j = self.rest_joints + torch.einsum("jcl,bl->bjc", self.joint_shape_dirs, betas)
         return v, j
 
-    def forward(self, pose: torch.Tensor, betas: torch.Tensor | None = None) -> HandOutput:
-        """Pose the hand.
+    @property
+    def linear_skinning(self) -> bool:
+        """Whether the vertices of a hand without betas are linear in its :meth:`skinning_rows` (no pose blend
+        shapes): ``vertices_t = rows @ skin_rest_t``, so any subset of vertices costs a GEMM of its size."""
+        return self.pose_dirs is None
 
-        Args:
-            pose: (B, 51) grasp vectors: translation (3, m), global axis-angle (3, about the rest wrist
-                joint), 15 finger joints x axis-angle (3) in MANO joint order, canonical-frame axes.
-            betas: (B, 10) shape parameters, or ``None`` for the average hand.
-
-        Returns:
-            :class:`HandOutput` with vertices (B, V, 3) and joints (B, 21, 3), metres, and the joints'
-            global rotations (B, 16, 3, 3).
-        """
+    def _kinematics(self, pose: torch.Tensor, betas: torch.Tensor | None
+                    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The shaped rest vertices (B, V, 3) (with pose blend shapes), the joints' global rotations
+        (B, 16, 3, 3) and positions (B, 16, 3) (without the translation), and the skinning transforms
+        ``[R | P - R J_rest]`` (B, 16, 3, 4) of (B, 51) poses; metres."""
         if pose.ndim != 2 or pose.shape[1] != POSE_DIM:
             raise ValueError(f"pose must have shape (B, {POSE_DIM}), got {tuple(pose.shape)}")
         pose = pose.to(self.rest_vertices.dtype)
@@ -165,9 +164,50 @@ class HandModel(torch.nn.Module):
         # Skinning transforms [R | P - R J_rest], blended per vertex.
         t = P - (R @ j_rest[..., None])[..., 0]
         A = torch.cat([R, t[..., None]], -1)  # (B, 16, 3, 4)
+        return v_rest, R, P, A
+
+    @staticmethod
+    def _rows(A: torch.Tensor, trans: torch.Tensor) -> torch.Tensor:
+        """(B, 3, 65) skinning rows of (B, 16, 3, 4) transforms and (B, 1, 3) translations."""
+        b = A.shape[0]
+        return torch.cat([A.permute(0, 2, 1, 3).reshape(b, 3, 4 * N_JOINTS), trans.transpose(1, 2)], 2)
+
+    def skinning_rows(self, pose: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The linear map from the rest hand to the posed one (only where :attr:`linear_skinning`).
+
+        Args:
+            pose: (B, 51) grasp vectors (as :meth:`forward`), no betas.
+
+        Returns:
+            rows (B, 3, 65): ``(rows.reshape(B * 3, 65) @ skin_rest_t).reshape(B, 3, V)`` is the posed
+            vertices, coordinate-major, by the GEMM of :meth:`forward`; ``skin_rest_t[:, ids]`` gives a
+            subset of them for a GEMM of its size. And the 16 joints (B, 16, 3), translated (the first 16 of
+            :meth:`forward`'s joints). Metres; differentiable.
+        """
+        if not self.linear_skinning:
+            raise ValueError(f"hand '{self.name}' has pose blend shapes: its vertices are not linear in skinning rows")
+        _, _, P, A = self._kinematics(pose, None)
+        trans = pose.to(self.rest_vertices.dtype)[:, None, :3]
+        return self._rows(A, trans), P + trans
+
+    def forward(self, pose: torch.Tensor, betas: torch.Tensor | None = None) -> HandOutput:
+        """Pose the hand.
+
+        Args:
+            pose: (B, 51) grasp vectors: translation (3, m), global axis-angle (3, about the rest wrist
+                joint), 15 finger joints x axis-angle (3) in MANO joint order, canonical-frame axes.
+            betas: (B, 10) shape parameters, or ``None`` for the average hand.
+
+        Returns:
+            :class:`HandOutput` with vertices (B, V, 3) and joints (B, 21, 3), metres, and the joints'
+            global rotations (B, 16, 3, 3).
+        """
+        v_rest, R, P, A = self._kinematics(pose, betas)
+        pose = pose.to(self.rest_vertices.dtype)
+        b = pose.shape[0]
         trans = pose[:, None, :3]
         if betas is None and self.pose_dirs is None:
-            a2 = torch.cat([A.permute(0, 2, 1, 3).reshape(b, 3, 4 * N_JOINTS), trans.transpose(1, 2)], 2)  # (B, 3, 65)
+            a2 = self._rows(A, trans)  # (B, 3, 65)
             verts_t = (a2.reshape(b * 3, -1) @ self.skin_rest_t).reshape(b, 3, -1)  # (B, 3, V)
             verts = verts_t.transpose(1, 2)  # (B, V, 3): a view, each coordinate contiguous
             tips = verts_t[:, :, self.tip_ids].transpose(1, 2)  # indexed in that layout: so is its gradient

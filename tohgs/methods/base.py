@@ -21,8 +21,10 @@ class PredictSettings:
     ``filter``, ``contactgen`` and ``flex``: GraspTTA's adaptation, F-GraspTTA's filter, ContactGen's solver
     and FLEX's optimisation (:mod:`tohgs.methods.grasp_tta`, :mod:`tohgs.methods.filtered`,
     :mod:`tohgs.methods.contact_gen`, :mod:`tohgs.methods.flex`); ``steer``, scene-aware guidance of
-    GraspDiffuser's sampling (:mod:`tohgs.models.guidance`; beyond the paper, off by default). A
-    method's ``settings`` block overlays the config's ``prediction`` block (the two sub-blocks key by key)."""
+    GraspDiffuser's sampling (:mod:`tohgs.models.guidance`; beyond the paper, off by default); ``chunk``,
+    the test configurations an optimising method solves as one batch of (configurations x samples) hands
+    (:meth:`Method.predict_many`; 1: one at a time, the same grasps either way). A method's ``settings``
+    block overlays the config's ``prediction`` block (the two sub-blocks key by key)."""
 
     samples: int = 16
     sampler: str = "ddim"
@@ -37,6 +39,11 @@ class PredictSettings:
     contactgen: dict = field(default_factory=dict)  # tohgs.grasps.contactgen_solver.SolverSettings
     flex: dict = field(default_factory=dict)  # tohgs.grasps.flex.FlexSettings
     steer: dict = field(default_factory=dict)  # tohgs.models.guidance.GuidanceSettings (scene-aware guidance)
+    chunk: int = 8  # configurations per batch of an optimising method (1: one at a time; bounds memory)
+
+    def __post_init__(self):
+        if self.chunk < 1:
+            raise ValueError(f"prediction.chunk must be at least 1, got {self.chunk}")
 
 
 @dataclass
@@ -53,13 +60,28 @@ class Prediction:
     info: dict[str, float] = field(default_factory=dict)
 
 
+@dataclass(frozen=True)
+class Request:
+    """One test configuration to predict: ``batch`` the configuration repeated S times (no contact, no
+    grasp), ``shard`` / ``row`` where it lies, ``generator`` (torch) and ``rng`` (numpy) its seeded streams
+    (:func:`tohgs.methods.predict.configuration_streams`)."""
+
+    batch: Batch
+    shard: MapShard
+    row: int
+    generator: torch.Generator
+    rng: np.random.Generator
+
+
 class Method:
     """A method kind: built once per prediction job from its config block, its trained components (by
     config name, eval mode, on ``device``), the settings, the hand model (on ``device``; the methods that
     pose hands use it) and, for a method of another method (``filtered``), that method's prediction store
     (arrays, attrs); then asked for each test configuration.
 
-    Subclasses set ``needs`` (the method keys that must name components) and implement :meth:`predict`.
+    Subclasses set ``needs`` (the method keys that must name components) and implement :meth:`predict`;
+    an optimising method also overrides :meth:`predict_many` to solve the hands of several configurations
+    as one batch, with the same grasps per configuration as :meth:`predict`.
     """
 
     def __init__(self, name: str, cfg: dict[str, Any], models: dict[str, torch.nn.Module], settings: PredictSettings,
@@ -95,6 +117,12 @@ class Method:
         (:func:`tohgs.methods.predict.configuration_streams`). None: the configuration
         cannot be predicted (e.g. ground-truth maps where it has no task grasp)."""
         raise NotImplementedError
+
+    def predict_many(self, requests: list[Request]) -> list[Prediction | None]:
+        """The predictions of several configurations (``settings.chunk`` of them at most), in order: each
+        as :meth:`predict` would make it alone (its own streams, maps, selections). This default predicts
+        them one at a time."""
+        return [self.predict(r.batch, r.shard, r.row, r.generator, r.rng) for r in requests]
 
 
 def gt_rows(shard: MapShard, row: int) -> np.ndarray:

@@ -3,7 +3,8 @@ representations sampled from the sequential CVAE (:mod:`tohgs.models.contact_gen
 grasp of each from its solver (:mod:`tohgs.grasps.contactgen_solver`).
 
 Key of the method block: ``model``, a ContactGen component with parts (``parts: true``). The prediction
-setting ``contactgen`` (:class:`tohgs.grasps.contactgen_solver.SolverSettings`) is this kind's. The
+setting ``contactgen`` (:class:`tohgs.grasps.contactgen_solver.SolverSettings`) is this kind's; the
+representations of ``chunk`` configurations are solved as one batch (the same grasps as one at a time). The
 stored contact maps are the sampled representations' contact; per configuration the mean solver energy
 at the end is recorded.
 """
@@ -12,11 +13,15 @@ from __future__ import annotations
 
 import time
 
+from dataclasses import fields
+
 import numpy as np
+import torch
 
 from tohgs.config import settings_from
-from tohgs.grasps.contactgen_solver import SolverSettings, solve
-from tohgs.methods.base import Method, Prediction
+from tohgs.geometry.contact_parts import PartContact
+from tohgs.grasps.contactgen_solver import SolverSettings, solve_many
+from tohgs.methods.base import Method, Prediction, Request
 
 
 class ContactGenMethod(Method):
@@ -32,14 +37,28 @@ class ContactGenMethod(Method):
         self.solver = settings_from(SolverSettings, self.settings.contactgen)
 
     def predict(self, batch, shard, row, generator, rng) -> Prediction | None:
-        t0 = time.perf_counter()
-        rep = self.generator.sample_representation(batch, generator)
+        return self.predict_many([Request(batch, shard, row, generator, rng)])[0]
+
+    def predict_many(self, requests: list[Request]) -> list[Prediction | None]:
+        """Per configuration (its own stream, in order) the sampled representations; then the solver on
+        every configuration's representations as one batch (:func:`tohgs.grasps.contactgen_solver.solve_many`);
+        the solver's time is shared equally among the configurations."""
+        reps, seconds = [], []
+        for r in requests:
+            t0 = time.perf_counter()
+            reps.append(self.generator.sample_representation(r.batch, r.generator))
+            seconds.append(time.perf_counter() - t0)
+        if not requests:
+            return []
+        sizes = [len(rep.contact) for rep in reps]
+        target = PartContact(*(torch.cat([getattr(rep, f.name) for rep in reps]) for f in fields(PartContact)))
         t1 = time.perf_counter()
-        grasp, history = solve(self.hand, batch.points, rep, self.solver)
-        t2 = time.perf_counter()
-        return Prediction(rep.contact.cpu().numpy().astype(np.float32), grasp.cpu().numpy().astype(np.float64),
-                          {"representation": t1 - t0, "solver": t2 - t1},
-                          info={"energy_end": history["energy"][-1] if history else float("nan")})
+        grasp, histories = solve_many(self.hand, torch.cat([r.batch.points for r in requests]), target, self.solver, sizes)
+        share = (time.perf_counter() - t1) / len(requests)
+        return [Prediction(rep.contact.cpu().numpy().astype(np.float32), g.cpu().numpy().astype(np.float64),
+                           {"representation": sec, "solver": share},
+                           info={"energy_end": history["energy"][-1] if history else float("nan")})
+                for rep, g, history, sec in zip(reps, grasp.split(sizes), histories, seconds)]
 
 
 METHOD = ContactGenMethod

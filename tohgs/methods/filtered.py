@@ -12,7 +12,9 @@ with that estimate; the hands with more than ``max_opp`` of their vertices insid
 or the estimated goal pose are discarded (the prediction's ``kept`` flags). The stored goal grasps stay the
 base method's, carried with the true transform: a hand that holds the object goes where the object goes,
 and the estimate only decides what is kept. The ICP error against the true transform and the share kept
-are recorded per configuration (the store's ``diagnostics``).
+are recorded per configuration (the store's ``diagnostics``). The goal transforms of ``chunk``
+configurations are estimated together (:func:`estimate_goal_transforms`; the same estimates as one at a
+time).
 """
 
 from __future__ import annotations
@@ -25,8 +27,8 @@ import torch
 
 from tohgs.config import settings_from
 from tohgs.geometry.cloud import penetration_fraction
-from tohgs.geometry.registration import ICPSettings, register, transform_error
-from tohgs.methods.base import Method, Prediction
+from tohgs.geometry.registration import ICPSettings, register_many, transform_error
+from tohgs.methods.base import Method, Prediction, Request
 
 TRANSFORMS = ("icp", "true")
 
@@ -72,13 +74,27 @@ def estimate_goal_transform(object_points: np.ndarray, init_scene: np.ndarray, g
     the points of the goal scene farther than ``moved_distance`` from every initial-scene point are what
     moved (the target at its goal pose), and the object's (N, 3) cloud at the initial pose is registered
     onto them (:func:`tohgs.geometry.registration.register`)."""
+    return estimate_goal_transforms([(object_points, init_scene, goal_scene)], icp, moved_distance)[0]
+
+
+def estimate_goal_transforms(views: list[tuple[np.ndarray, np.ndarray, np.ndarray]], icp: ICPSettings,
+                             moved_distance: float) -> list[tuple[np.ndarray, int]]:
+    """:func:`estimate_goal_transform` of several configurations' (object points, initial scene, goal
+    scene), their registrations by :func:`tohgs.geometry.registration.register_many`."""
     from scipy.spatial import cKDTree
 
-    d, _ = cKDTree(init_scene).query(goal_scene)
-    moved = goal_scene[d > moved_distance]
-    if len(moved) < 3:  # the target barely moved: nothing to register
-        return np.eye(4), len(moved)
-    return register(object_points, moved, icp).transform, len(moved)
+    out: list[tuple[np.ndarray, int]] = []
+    pairs, where = [], []
+    for object_points, init_scene, goal_scene in views:
+        d, _ = cKDTree(init_scene).query(goal_scene)
+        moved = goal_scene[d > moved_distance]
+        out.append((np.eye(4), len(moved)))  # the target barely moved (< 3 points): nothing to register
+        if len(moved) >= 3:
+            where.append(len(out) - 1)
+            pairs.append((object_points, moved))
+    for i, reg in zip(where, register_many(pairs, icp)):
+        out[i] = (reg.transform, out[i][1])
+    return out
 
 
 class Filtered(Method):
@@ -95,34 +111,60 @@ class Filtered(Method):
                      for i, (o, c) in enumerate(zip(arrays["object_id"], arrays["config_index"]))}
 
     def predict(self, batch, shard, row, generator, rng) -> Prediction | None:
-        arrays, _ = self.base
-        key = (shard.attrs["objects"][int(shard.object_id[row])], int(shard.config_index[row]))
-        if key not in self.rows:  # the base method predicted nothing here
-            return None
-        i = self.rows[key]
-        t0 = time.perf_counter()
-        grasp = np.asarray(arrays["grasp_init"][i], dtype=np.float64).copy()
-        grasp[:, :3] -= shard.centroid[row]  # back to the network frame
-        base_kept = np.asarray(arrays["kept"][i], bool)
-        kept, info = self.keep(batch, torch.as_tensor(grasp, dtype=torch.float32, device=batch.device),
-                               int(rng.integers(2**31)))
-        return Prediction(np.asarray(arrays["contact"][i], np.float32), grasp, {"filter": time.perf_counter() - t0},
-                          kept=kept & base_kept, info=info)
+        return self.predict_many([Request(batch, shard, row, generator, rng)])[0]
 
-    def keep(self, batch, grasp: torch.Tensor, seed: int) -> tuple[np.ndarray, dict[str, float]]:
-        """(S,) which of the (S, 51) network-frame hands pass, and the configuration's record (the
-        transform's error, the OPPs from the scene cloud, how many were kept)."""
+    def predict_many(self, requests: list[Request]) -> list[Prediction | None]:
+        """Per configuration the base method's grasps and its seed (from its own stream, in order); the
+        goal transforms of all of them estimated as one batch (:func:`estimate_goal_transforms`), whose
+        time is shared equally; then each configuration's filter."""
+        arrays, _ = self.base
+        staged = []  # (index, base row, network-frame grasps, seed)
+        for j, r in enumerate(requests):
+            key = (r.shard.attrs["objects"][int(r.shard.object_id[r.row])], int(r.shard.config_index[r.row]))
+            if key not in self.rows:  # the base method predicted nothing here
+                continue
+            i = self.rows[key]
+            grasp = np.asarray(arrays["grasp_init"][i], dtype=np.float64).copy()
+            grasp[:, :3] -= r.shard.centroid[r.row]  # back to the network frame
+            staged.append((j, i, grasp, int(r.rng.integers(2**31))))
+        t0 = time.perf_counter()
+        estimates = self.goal_transforms([requests[j].batch for j, *_ in staged], [seed for *_, seed in staged])
+        share = (time.perf_counter() - t0) / max(1, len(staged))
+        out: list[Prediction | None] = [None] * len(requests)
+        for (j, i, grasp, _), (estimate, info) in zip(staged, estimates):
+            t1 = time.perf_counter()
+            batch = requests[j].batch
+            kept, info = self.keep(batch, torch.as_tensor(grasp, dtype=torch.float32, device=batch.device), estimate,
+                                   info)
+            out[j] = Prediction(np.asarray(arrays["contact"][i], np.float32), grasp,
+                                {"filter": share + time.perf_counter() - t1},
+                                kept=kept & np.asarray(arrays["kept"][i], bool), info=info)
+        return out
+
+    def goal_transforms(self, batches: list, seeds: list[int]) -> list[tuple[np.ndarray, dict[str, float]]]:
+        """Per configuration (its batch and seed): the (4, 4) init-to-goal transform the filter uses (the
+        ICP estimate, or the true one) and its record (the estimate's error against the truth, the moved
+        points)."""
+        truths = [b.goal_transform[0].cpu().numpy().astype(np.float64) for b in batches]
+        if self.filter.transform != "icp":
+            return [(t, {}) for t in truths]
+        views = []
+        for b, truth, seed in zip(batches, truths, seeds):
+            points = b.points[0].cpu().numpy().astype(np.float64)
+            views.append((points, *scene_views(points, truth, b.scene[0].cpu().numpy().astype(np.float64), seed)))
+        out = []
+        for (points, _, _), truth, (estimate, moved) in zip(views, truths, estimate_goal_transforms(
+                views, self.icp, self.filter.moved_distance)):
+            info = {f"icp_{k}": v for k, v in transform_error(estimate, truth, points).items()}
+            out.append((estimate, {**info, "icp_moved_points": float(moved)}))
+        return out
+
+    def keep(self, batch, grasp: torch.Tensor, estimate: np.ndarray, info: dict[str, float]
+             ) -> tuple[np.ndarray, dict[str, float]]:
+        """(S,) which of the (S, 51) network-frame hands pass with the (4, 4) goal transform ``estimate``,
+        and the configuration's record (``info``, then the OPPs from the scene cloud, how many were kept)."""
         f = self.filter
-        points = batch.points[0].cpu().numpy().astype(np.float64)
-        truth = batch.goal_transform[0].cpu().numpy().astype(np.float64)
-        info: dict[str, float] = {}
-        if f.transform == "icp":
-            init_scene, goal_scene = scene_views(points, truth, batch.scene[0].cpu().numpy().astype(np.float64), seed)
-            estimate, moved = estimate_goal_transform(points, init_scene, goal_scene, self.icp, f.moved_distance)
-            info.update({f"icp_{k}": v for k, v in transform_error(estimate, truth, points).items()})
-            info["icp_moved_points"] = float(moved)
-        else:
-            estimate = truth
+        info = dict(info)
         with torch.no_grad():
             v_init = self.hand(grasp).vertices
             T = torch.as_tensor(estimate, dtype=v_init.dtype, device=v_init.device)

@@ -10,8 +10,10 @@ Keys of the method block:
   contact component (M-GraspTTA TA: ContactDiffuser's maps) or ``ground_truth`` (M-GraspTTA GT: the
   configuration's own task-grasp maps: those the ``Dataset`` row evaluates, :func:`tohgs.methods.base.ground_truth_pick`).
 
-The prediction settings ``tta`` (:class:`tohgs.grasps.tta.TTASettings`) are this kind's. Per
-configuration the mean energy before and after the adaptation is recorded. Where the generator reads no
+The prediction settings ``tta`` (:class:`tohgs.grasps.tta.TTASettings`) are this kind's. The hands of
+``chunk`` configurations are adapted as one batch, each configuration's maps and coarse grasps drawn from
+its own streams first (the same grasps as one configuration at a time). Per configuration the mean energy
+before and after the adaptation is recorded. Where the generator reads no
 map, the stored contact maps are ContactNet's for the adapted hands (what the adaptation aimed at).
 """
 
@@ -23,8 +25,8 @@ import numpy as np
 import torch
 
 from tohgs.config import settings_from
-from tohgs.grasps.tta import TTASettings, adapt
-from tohgs.methods.base import Method, Prediction
+from tohgs.grasps.tta import TTASettings, adapt_many, by_problem, pose_problems
+from tohgs.methods.base import Method, Prediction, Request
 from tohgs.methods.contact_grasp import GROUND_TRUTH, NO_CONTACT, smooth_contact
 
 
@@ -56,25 +58,48 @@ class GraspTTA(Method):
         return smooth_contact(batch.points[0], contact, s.contact_smoothing)
 
     def predict(self, batch, shard, row, generator, rng) -> Prediction | None:
+        return self.predict_many([Request(batch, shard, row, generator, rng)])[0]
+
+    def predict_many(self, requests: list[Request]) -> list[Prediction | None]:
+        """Per configuration (its own streams, in order) the maps and the coarse grasps; then the
+        adaptation of every configuration's hands as one batch (:func:`tohgs.grasps.tta.adapt_many`); the
+        adaptation's time is shared equally among the configurations."""
         s = self.settings
-        t0 = time.perf_counter()
-        contact = self.contact_maps(batch, shard, row, generator)
-        if contact is not None and contact.numel() == 0:
-            return None
-        if contact is not None:
-            batch = batch.with_contact(contact)
-        t1 = time.perf_counter()
-        coarse = self.generator.sample_grasps(batch, s.sampler, s.steps, generator, s.guidance)
+        staged = []  # (index, batch with its maps, maps or None, coarse grasps, seconds)
+        for i, r in enumerate(requests):
+            t0 = time.perf_counter()
+            contact = self.contact_maps(r.batch, r.shard, r.row, r.generator)
+            if contact is not None and contact.numel() == 0:
+                continue
+            batch = r.batch if contact is None else r.batch.with_contact(contact)
+            t1 = time.perf_counter()
+            coarse = self.generator.sample_grasps(batch, s.sampler, s.steps, r.generator, s.guidance)
+            staged.append((i, batch, contact, coarse, {"contact_map": t1 - t0, "grasp": time.perf_counter() - t1}))
+        out: list[Prediction | None] = [None] * len(requests)
+        if not staged:
+            return out
+        sizes = [len(c) for _, _, _, c, _ in staged]
+        points = torch.cat([b.points for _, b, _, _, _ in staged])
         t2 = time.perf_counter()
-        grasp, history = adapt(self.hand, coarse, batch.points, self.contact_net, self.alpha, self.tta)
-        t3 = time.perf_counter()
-        if contact is None:  # what the adaptation aimed at: ContactNet's map for the adapted hand
+        grasp, histories = adapt_many(self.hand, torch.cat([c for _, _, _, c, _ in staged]), points, self.contact_net,
+                                      self.alpha, self.tta, sizes)
+        share = (time.perf_counter() - t2) / len(staged)
+        own = [j for j, (_, _, contact, _, _) in enumerate(staged) if contact is None]
+        net_maps: dict[int, torch.Tensor] = {}
+        if own:  # what the adaptation aimed at: ContactNet's map for the adapted hand
+            rows = torch.cat([torch.arange(sum(sizes[:j]), sum(sizes[:j + 1])) for j in own])
             with torch.no_grad():
-                contact = self.contact_net.predict_map(batch.points, self.hand(grasp).vertices)
-        seconds = {"contact_map": t1 - t0, "grasp": t2 - t1, "adaptation": t3 - t2}
-        info = {"energy_start": history["energy"][0], "energy_end": history["energy"][-1]}
-        return Prediction(contact.cpu().numpy().astype(np.float32), grasp.cpu().numpy().astype(np.float64),
-                          seconds, info=info)
+                own_sizes = [sizes[j] for j in own]
+                verts = pose_problems(self.hand, grasp[rows], own_sizes).vertices
+                maps = by_problem(self.contact_net.predict_map, own_sizes, points[rows], verts)
+            for j, m in zip(own, maps.split([sizes[j] for j in own])):
+                net_maps[j] = m
+        for j, ((i, _, contact, _, seconds), g, history) in enumerate(zip(staged, grasp.split(sizes), histories)):
+            maps = net_maps[j] if contact is None else contact
+            info = {"energy_start": history["energy"][0], "energy_end": history["energy"][-1]}
+            out[i] = Prediction(maps.cpu().numpy().astype(np.float32), g.cpu().numpy().astype(np.float64),
+                                {**seconds, "adaptation": share}, info=info)
+        return out
 
 
 METHOD = GraspTTA

@@ -24,7 +24,7 @@ from tohgs.data.maps import MapDataset
 from tohgs.data.predictions import read_predictions, write_predictions
 from tohgs.geometry.grasp import GRASP_DIM, transform_grasp
 from tohgs.methods import method_kind_exists, method_kinds
-from tohgs.methods.base import Method, PredictSettings
+from tohgs.methods.base import Method, PredictSettings, Request
 from tohgs.models.checkpoint import load_component
 from tohgs.models.train import pick_device
 
@@ -90,28 +90,40 @@ def predict(task: str, name: str, method: dict[str, Any], test_shards: list[str 
     skipped = 0
     from tqdm import tqdm
 
-    for i in tqdm(range(len(data)), desc=f"predict {task}/{name}", mininterval=5.0):
-        item = data[i]
-        shard, c = data.shards[item["shard"]], item["row"]
-        batch = Batch.collate([item], device).repeat(s.samples)
-        gen, rng = configuration_streams(s.seed, shard.attrs["objects"][int(item["object_id"])], int(item["config_index"]))
-        pred = runner.predict(batch, shard, c, gen, rng)
-        if pred is None:
-            skipped += 1
-            continue
-        for k, v in pred.seconds.items():
-            seconds[k] = seconds.get(k, 0.0) + v
-        world = np.asarray(pred.grasp, dtype=np.float64).copy()
-        world[:, :3] += shard.centroid[c]
-        rows["object_id"].append(int(item["object_id"]))
-        rows["config_index"].append(int(item["config_index"]))
-        rows["contact"].append(np.asarray(pred.contact, np.float32))
-        rows["grasp_init"].append(world.astype(np.float32))
-        rows["grasp_goal"].append(transform_grasp(world, shard.goal_transform[c],
-                                                  np.asarray(shard.attrs["hand_wrist"])).astype(np.float32))
-        rows["kept"].append(np.ones(s.samples, bool) if pred.kept is None else np.asarray(pred.kept, bool))
-        for k in set(diagnostics) | set(pred.info):  # a key a configuration lacks is NaN there
-            diagnostics.setdefault(k, [float("nan")] * (len(rows["kept"]) - 1)).append(float(pred.info.get(k, np.nan)))
+    def requests(start: int) -> list[Request]:
+        out = []
+        for i in range(start, min(start + s.chunk, len(data))):
+            item = data[i]
+            shard, c = data.shards[item["shard"]], item["row"]
+            gen, rng = configuration_streams(s.seed, shard.attrs["objects"][int(item["object_id"])], int(item["config_index"]))
+            out.append(Request(Batch.collate([item], device).repeat(s.samples), shard, c, gen, rng))
+        return out
+
+    with tqdm(total=len(data), desc=f"predict {task}/{name}", mininterval=5.0) as bar:
+        for start in range(0, len(data), s.chunk):
+            chunk = requests(start)
+            preds = runner.predict_many(chunk)
+            if len(preds) != len(chunk):
+                raise RuntimeError(f"method {name!r} returned {len(preds)} predictions for {len(chunk)} configurations")
+            for req, pred in zip(chunk, preds):
+                if pred is None:
+                    skipped += 1
+                    continue
+                shard, c = req.shard, req.row
+                for k, v in pred.seconds.items():
+                    seconds[k] = seconds.get(k, 0.0) + v
+                world = np.asarray(pred.grasp, dtype=np.float64).copy()
+                world[:, :3] += shard.centroid[c]
+                rows["object_id"].append(int(shard.object_id[c]))
+                rows["config_index"].append(int(shard.config_index[c]))
+                rows["contact"].append(np.asarray(pred.contact, np.float32))
+                rows["grasp_init"].append(world.astype(np.float32))
+                rows["grasp_goal"].append(transform_grasp(world, shard.goal_transform[c],
+                                                          np.asarray(shard.attrs["hand_wrist"])).astype(np.float32))
+                rows["kept"].append(np.ones(s.samples, bool) if pred.kept is None else np.asarray(pred.kept, bool))
+                for k in set(diagnostics) | set(pred.info):  # a key a configuration lacks is NaN there
+                    diagnostics.setdefault(k, [float("nan")] * (len(rows["kept"]) - 1)).append(float(pred.info.get(k, np.nan)))
+            bar.update(len(chunk))
     n = len(rows["object_id"])
     if n == 0:  # e.g. ground-truth maps for test configurations that kept no task grasp
         log.warning("%s/%s: no test configuration could be predicted (%d skipped)", task, name, skipped)

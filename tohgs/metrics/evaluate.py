@@ -38,11 +38,11 @@ from tohgs.assets.mesh import collision_mesh, object_mesh
 from tohgs.config import settings_from
 from tohgs.data.predictions import read_predictions
 from tohgs.data.scenes import read_scenes
+from tohgs.geometry.grasp import pose_matrix
 from tohgs.geometry.scene import SceneCollider, scene_meshes
 from tohgs.hand.assets import HandAssets
-from tohgs.geometry.grasp import pose_matrix
-from tohgs.metrics.quality import (DisplacementSimulator, RobustSDSettings, SDSettings, hand_quality, palm_gravity,
-                                   surface_voxels)
+from tohgs.metrics.quality import (DisplacementSimulator, RobustSDSettings, SDSettings, SDWorkers, hand_quality,
+                                   palm_gravity, surface_voxels)
 
 log = logging.getLogger(__name__)
 
@@ -116,8 +116,7 @@ def grasp_metrics(verts_init: np.ndarray, verts_goal: np.ndarray, faces: np.ndar
         T = pose_matrix(target_pose)
         centre = T[:3, :3] @ np.asarray(obj.vertex_mean, dtype=np.float64) + T[:3, 3]
         g = palm_gravity(verts_init[:, palm_ids].mean(1), centre, float(np.linalg.norm(sim.settings.gravity)))
-        m["sd_palm"] = np.array([sim.displacement(v, faces, object_pose=target_pose, gravity=g[i])
-                                 for i, v in enumerate(verts_init)])
+        m["sd_palm"] = sim.displacements(verts_init, faces, object_pose=target_pose, gravity=g)
     return {**m, "init_opp": occupied_fraction(verts_init, collider), "goal_opp": occupied_fraction(verts_goal, collider)}
 
 
@@ -130,8 +129,8 @@ def grasp_rng(seed: int, obj: str, config_index: int, sample: int) -> np.random.
 def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | Path], objects_dir: str | Path,
                          supports_json: str | Path, hand: HandAssets, sd: dict, voxel_pitch: float = 0.001,
                          cache_dir: str | Path | None = None, progress: bool = False,
-                         robust_sd: dict | None = None, palm_sd: bool = False, pv_mesh: str = "collision"
-                         ) -> pd.DataFrame:
+                         robust_sd: dict | None = None, palm_sd: bool = False, pv_mesh: str = "collision",
+                         threads: int = 1) -> pd.DataFrame:
     """One row per predicted grasp (columns :data:`COLUMNS`) of one task and method.
 
     Args:
@@ -151,6 +150,8 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
             m (an empty list for a grasp without them).
         palm_sd: also column ``sd_palm`` (SD with gravity out of the palm; NaN without).
         pv_mesh: the surface PV voxelises, ``"collision"`` (the paper's protocol) or ``"mesh"``.
+        threads: the job's cores: SD runs in that many worker processes, shared by the objects
+            (:class:`~tohgs.metrics.quality.SDWorkers`; the same numbers as one).
     """
     from tohgs.assets.supports import read_supports
 
@@ -175,6 +176,7 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
 
         it = tqdm(it, desc=f"evaluate {attrs['task']}/{attrs['method']}", mininterval=5.0)
     sims: dict[str, DisplacementSimulator] = {}
+    workers = SDWorkers(threads)
     try:
         for i in it:
             name = vocab[int(arrays["object_id"][i])]
@@ -186,7 +188,7 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
                 raise ValueError(f"{prediction_store}: configuration index {c} of {name!r} is out of range ({len(sc)})")
             obj = _object_assets(objects_dir, name, voxel_pitch, assets, cache_dir, pv_mesh)
             if name not in sims:
-                sims[name] = DisplacementSimulator(obj.collision, obj.vertex_mean, s_sd)
+                sims[name] = DisplacementSimulator(obj.collision, obj.vertex_mean, s_sd, workers=workers)
             collider = SceneCollider(scene_meshes(sc, c, objects_dir, supports, meshes))
             kept = np.asarray(arrays["kept"][i], bool)
             m, ds = {}, float("nan")  # DS of a configuration that a filter left fewer than two grasps: none
@@ -211,5 +213,6 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
     finally:
         for sim in sims.values():
             sim.close()
+        workers.close()
     frame = pd.DataFrame(rows, columns=list(COLUMNS))
     return frame.astype({"config_index": np.int32, "sample": np.int32, "hand_vertices": np.int32, "kept": bool})

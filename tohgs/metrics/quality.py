@@ -12,7 +12,9 @@
   pulls the object from the palm centre through the object's centre: the direction it is lifted against
   when the hand approaches from the free side of its support (a table top, a shelf board), whatever
   orientation the object rests in; ``"fixed"`` uses the ``gravity`` vector of the grasp's frame (for
-  grasps in the world frame, -z).
+  grasps in the world frame, -z). Many hands: :meth:`DisplacementSimulator.displacements` runs the same
+  protocol per hand, bit for bit, in ``workers`` processes (nearly all of SD's time is PyBullet's contact
+  detection and solver, the protocol's physics itself; docs/stages.md, "Where SD's time goes").
 - Robust SD (beyond the protocol): SD again under K tiny perturbations of the start (the hand moved by at
   most half a millimetre, the solver's iterations jittered), for a few grasps per configuration
   (:class:`RobustSDSettings`); the protocol's single SD stays the paper's QR.
@@ -23,6 +25,10 @@
 from __future__ import annotations
 
 import logging
+import math
+import multiprocessing as mp
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -133,9 +139,88 @@ class SDSettings:
     failed_displacement: float = 0.10
 
 
+class SDWorkers:
+    """Worker processes that simulate SD, shared by the simulators of a job (a worker keeps a simulator of
+    each of the last few objects it was given).
+
+    PyBullet keeps about 0.6 MB per simulated hand until its process ends (``resetSimulation`` and
+    ``disconnect`` do not free it), so the workers are replaced by fresh processes once they have simulated
+    ``recycle_after`` hands (between two calls). Forked on first use, ended by :meth:`close`.
+
+    Args:
+        workers: processes (a job's cores, Snakemake's ``threads``).
+        recycle_after: hands before the workers are replaced.
+    """
+
+    def __init__(self, workers: int = 1, recycle_after: int = 500) -> None:
+        if int(workers) < 1 or int(recycle_after) < 1:
+            raise ValueError(f"SD needs at least one worker and recycle_after >= 1, got workers={workers}, "
+                             f"recycle_after={recycle_after}")
+        self.workers, self.recycle_after = int(workers), int(recycle_after)
+        self._pool: ProcessPoolExecutor | None = None
+        self._hands = 0  # hands the current processes have simulated
+
+    def close(self) -> None:
+        """End the worker processes."""
+        if self._pool is not None:
+            self._pool.shutdown(cancel_futures=True)
+            self._pool = None
+
+    def __enter__(self) -> "SDWorkers":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def displacements(self, collision_obj: str | Path, vertex_mean: np.ndarray, settings: SDSettings, hv: np.ndarray,
+                      faces: np.ndarray, object_pose: np.ndarray | None, gravity: np.ndarray | None,
+                      iterations: np.ndarray | None, bar=None) -> np.ndarray:
+        """(B,) SD of the (B, V, 3) hands ``hv`` by :meth:`DisplacementSimulator.displacement` of a simulator
+        of the object (``collision_obj``, ``vertex_mean``, ``settings``) in the workers: the hands in
+        contiguous chunks (about four per worker, so that a slow chunk does not hold the others up), put back
+        in order; ``gravity`` (B, 3) and ``iterations`` (B,) per hand or None (the settings'); ``bar`` a
+        progress bar to advance."""
+        b = len(hv)
+        if self._pool is not None and self._hands >= self.recycle_after:
+            self._pool.shutdown()  # fresh processes give back the memory PyBullet kept
+            self._pool = None
+        if self._pool is None:
+            # fork, not spawn: spawn re-runs the parent's __main__ (a Snakemake script) in each worker.
+            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("fork"))
+            self._hands = 0
+        self._hands += b
+        size = max(1, math.ceil(b / (4 * self.workers)))
+        starts = range(0, b, size)
+        mean = np.asarray(vertex_mean, dtype=np.float64)
+        futures: list[Future] = [
+            self._pool.submit(_displacement_chunk, str(collision_obj), mean, settings, hv[a:a + size], faces, object_pose,
+                              None if gravity is None else gravity[a:a + size],
+                              None if iterations is None else iterations[a:a + size])
+            for a in starts]
+        out = np.empty(b)
+        try:
+            for a, future in zip(starts, futures):
+                chunk = future.result()
+                out[a:a + len(chunk)] = chunk
+                if bar is not None:
+                    bar.update(len(chunk))
+        except BrokenProcessPool as exc:
+            from tohgs.sim.isolation import SimulationCrash
+
+            self._pool = None
+            raise SimulationCrash(f"an SD worker process died while simulating hands on {collision_obj}; "
+                                  "see the log for the native stack") from exc
+        return out
+
+
 @dataclass
 class DisplacementSimulator:
-    """SD for many hands on one object: the object's collision parts are loaded once per world reset.
+    """SD for many hands on one object.
+
+    :meth:`displacement` is the protocol for one hand, the reference: a fresh world per hand (reset, the
+    hand's triangle mesh, the object's collision parts parsed from ``collision_obj``, 35 steps), in this
+    process. :meth:`displacements` gives the same SD for a batch of hands, bit for bit, from worker
+    processes (:class:`SDWorkers`) that each run :meth:`displacement` on their share.
 
     Args:
         collision_obj: the object's convex decomposition (``collision.obj`` of the objects stage), in the
@@ -143,11 +228,15 @@ class DisplacementSimulator:
             checksum the stage recorded (``ValueError`` naming a damaged file).
         vertex_mean: (3,) the object's mesh vertex mean in that frame, m: its inertial frame for SD.
         settings: the protocol.
+        workers: the processes of :meth:`displacements`: a number (this simulator's own
+            :class:`SDWorkers`, ended by :meth:`close`) or an :class:`SDWorkers` shared with the job's
+            other simulators (its owner ends it).
     """
 
     collision_obj: str | Path
     vertex_mean: np.ndarray
     settings: SDSettings = field(default_factory=SDSettings)
+    workers: int | SDWorkers = 1
 
     def __post_init__(self) -> None:
         from tohgs.assets.manifest import META_JSON, check_object_file
@@ -155,9 +244,14 @@ class DisplacementSimulator:
 
         if (Path(self.collision_obj).parent / META_JSON).is_file():  # an objects folder: check its checksum
             check_object_file(self.collision_obj)
+        self._own = not isinstance(self.workers, SDWorkers)
+        self._workers = SDWorkers(self.workers) if self._own else self.workers
         self._client = DirectClient()
 
     def close(self) -> None:
+        """Disconnect the client and end the worker processes if they are this simulator's own."""
+        if self._own:
+            self._workers.close()
         self._client.close()
 
     def __enter__(self) -> "DisplacementSimulator":
@@ -205,6 +299,70 @@ class DisplacementSimulator:
         except pb.error:
             return s.failed_displacement
 
+    def displacements(self, hand_vertices: np.ndarray, hand_faces: np.ndarray, object_pose: np.ndarray | None = None,
+                      gravity: np.ndarray | None = None, solver_iterations: np.ndarray | None = None,
+                      progress: bool = False) -> np.ndarray:
+        """SD of B hands, m: :meth:`displacement` of each, the same numbers bit for bit, in the worker
+        processes (each hand is simulated alone in a freshly reset world, so which process simulates it, and
+        after which other hands, does not change its SD).
+
+        Args:
+            hand_vertices: (B, V, 3) metres, world frame.
+            hand_faces: (F, 3) hand triangles.
+            object_pose: the object's mesh-frame pose ``[x, y, z, qx, qy, qz, qw]`` (default: identity).
+            gravity: (B, 3) or (3,) m/s^2 (default: the settings' ``gravity``).
+            solver_iterations: (B,) solver iterations per hand (default: the settings').
+            progress: show a progress bar over the hands.
+
+        Returns:
+            (B,) SD, m (``settings.failed_displacement`` for a failed simulation).
+        """
+        hv = np.asarray(hand_vertices, dtype=np.float64)
+        if hv.ndim != 3 or hv.shape[-1] != 3:
+            raise ValueError(f"hand_vertices must have shape (B, V, 3), got {hv.shape}")
+        b = len(hv)
+        g = None if gravity is None else np.broadcast_to(np.asarray(gravity, dtype=np.float64), (b, 3))
+        iters = (None if solver_iterations is None else
+                 np.broadcast_to(np.asarray(solver_iterations, dtype=np.int64), (b,)))
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=b, desc="SD", mininterval=5.0)
+        try:
+            return self._workers.displacements(self.collision_obj, self.vertex_mean, self.settings, hv,
+                                               np.asarray(hand_faces), object_pose, g, iters, bar)
+        finally:
+            if bar is not None:
+                bar.close()
+
+
+#: Each worker process's simulators, by object and protocol, the most recently used last
+#: (:func:`_displacement_chunk`).
+_WORKER_SIMULATORS: dict[tuple, DisplacementSimulator] = {}
+_WORKER_KEEP = 4  # simulators a worker keeps (a job's objects come one after another)
+
+
+def _displacement_chunk(collision_obj: str, vertex_mean: np.ndarray, settings: SDSettings, hands: np.ndarray,
+                        faces: np.ndarray, object_pose: np.ndarray | None, gravity: np.ndarray | None,
+                        iterations: np.ndarray | None) -> np.ndarray:
+    """(C,) SD of C hands (C, V, 3) in a worker process: :meth:`DisplacementSimulator.displacement` of each,
+    on a simulator of the object kept for the worker's next chunks; ``gravity`` (C, 3) and ``iterations``
+    (C,) per hand or None (the settings')."""
+    import faulthandler
+
+    faulthandler.enable()  # a native crash leaves its stack in the job's log
+    key = (collision_obj, vertex_mean.tobytes(), repr(settings))
+    sim = _WORKER_SIMULATORS.pop(key, None)
+    if sim is None:
+        sim = DisplacementSimulator(collision_obj, vertex_mean, settings)
+        while len(_WORKER_SIMULATORS) >= _WORKER_KEEP:
+            _WORKER_SIMULATORS.pop(next(iter(_WORKER_SIMULATORS))).close()
+    _WORKER_SIMULATORS[key] = sim
+    return np.array([sim.displacement(hands[i], faces, object_pose, None if gravity is None else gravity[i],
+                                      None if iterations is None else int(iterations[i])) for i in range(len(hands))],
+                    dtype=np.float64)
+
 
 @dataclass(frozen=True)
 class RobustSDSettings:
@@ -226,24 +384,32 @@ class RobustSDSettings:
             raise ValueError(f"robust SD settings must be non-negative, got {self}")
 
 
-def perturbed_displacements(sim: DisplacementSimulator, hand_vertices: np.ndarray, hand_faces: np.ndarray,
-                            settings: RobustSDSettings, rng: np.random.Generator,
-                            object_pose: np.ndarray | None = None, gravity: np.ndarray | None = None) -> np.ndarray:
-    """(K,) SD of one hand, m, under K = ``settings.perturbations`` perturbed starts: the protocol of
-    :meth:`DisplacementSimulator.displacement` with the hand (V, 3) moved by a random offset in a ball of
-    radius ``settings.offset`` and the solver's iterations jittered (:class:`RobustSDSettings`).
-
-    The protocol's SD is one draw of a chaotic simulation for a marginal grasp (the same grasp can slip
-    1 cm or 11 cm after a sub-millimetre change); the spread of these K values says how far to trust it."""
+def perturbed_starts(hand_vertices: np.ndarray, settings: RobustSDSettings, rng: np.random.Generator,
+                     solver_iterations: int) -> tuple[np.ndarray, np.ndarray]:
+    """The K = ``settings.perturbations`` perturbed starts of one hand (:class:`RobustSDSettings`): (K, V, 3)
+    the (V, 3) hand moved by random offsets in a ball of radius ``settings.offset`` (m), and (K,) the
+    protocol's ``solver_iterations`` jittered (at least 1), drawn from ``rng`` in that order."""
     k = settings.perturbations
     direction = rng.normal(size=(k, 3))
     direction /= np.linalg.norm(direction, axis=1, keepdims=True).clip(1e-12)
     radius = settings.offset * rng.random(k) ** (1.0 / 3.0)  # uniform in the ball
     jitter = rng.integers(-settings.solver_jitter, settings.solver_jitter + 1, k)
-    base = sim.settings.solver_iterations
     hv = np.asarray(hand_vertices, dtype=np.float64)
-    return np.array([sim.displacement(hv + radius[i] * direction[i], hand_faces, object_pose, gravity,
-                                      solver_iterations=max(1, base + int(jitter[i]))) for i in range(k)])
+    hands = hv[None] + (radius[:, None] * direction)[:, None, :]
+    return hands, np.maximum(1, int(solver_iterations) + jitter)
+
+
+def perturbed_displacements(sim: DisplacementSimulator, hand_vertices: np.ndarray, hand_faces: np.ndarray,
+                            settings: RobustSDSettings, rng: np.random.Generator,
+                            object_pose: np.ndarray | None = None, gravity: np.ndarray | None = None) -> np.ndarray:
+    """(K,) SD of one hand, m, under K = ``settings.perturbations`` perturbed starts: the protocol of
+    :meth:`DisplacementSimulator.displacement` with the hand (V, 3) moved by a random offset in a ball of
+    radius ``settings.offset`` and the solver's iterations jittered (:func:`perturbed_starts`).
+
+    The protocol's SD is one draw of a chaotic simulation for a marginal grasp (the same grasp can slip
+    1 cm or 11 cm after a sub-millimetre change); the spread of these K values says how far to trust it."""
+    hands, iterations = perturbed_starts(hand_vertices, settings, rng, sim.settings.solver_iterations)
+    return sim.displacements(hands, hand_faces, object_pose, gravity, iterations)
 
 
 IDENTITY_POSE = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])  # [x, y, z, qx, qy, qz, qw]
@@ -264,8 +430,11 @@ def hand_quality(hand_vertices: np.ndarray, faces: np.ndarray, palm_ids: np.ndar
         faces: (F, 3) the hand's closed faces.
         palm_ids: the palm's vertex ids (SD's ``away_from_palm`` gravity pulls from the palm centre).
         mesh: the object's mesh (its own frame); ``voxels``: its surface voxels (:func:`surface_voxels`).
-        sim: a simulator of the object (its collision parts and vertex mean), with the SD settings.
+        sim: a simulator of the object (its collision parts and vertex mean), with the SD settings; the S
+            hands (and the robust starts, another batch) go to :meth:`DisplacementSimulator.displacements`,
+            so its ``workers`` share them.
         object_pose: the object's ``[x, y, z, qx, qy, qz, qw]`` pose (default: its own frame).
+        progress: show a progress bar over the hands' SD.
     """
     pose = IDENTITY_POSE if object_pose is None else np.asarray(object_pose, dtype=np.float64)
     T = pose_matrix(pose)
@@ -274,22 +443,20 @@ def hand_quality(hand_vertices: np.ndarray, faces: np.ndarray, palm_ids: np.ndar
     cd = np.atleast_1d(contact_distance(local, mesh))
     centre = T[:3, :3] @ np.asarray(sim.vertex_mean, dtype=np.float64) + T[:3, 3]
     gravity = sd_gravity(sim.settings, hand_vertices[:, palm_ids].mean(1), centre)
-    it = range(len(hand_vertices))
-    if progress:
-        from tqdm import tqdm
-
-        it = tqdm(it, desc="SD", mininterval=5.0)
-    sd = np.array([sim.displacement(hand_vertices[i], faces, object_pose=pose, gravity=gravity[i]) for i in it])
+    sd = sim.displacements(hand_vertices, faces, pose, gravity, progress=progress)
     out = {"pv": pv, "sd": sd, "contact_distance": cd}
     if robust is not None and robust.perturbations > 0:
-        s = len(hand_vertices)
+        s, k = len(hand_vertices), robust.perturbations
         if robust_rngs is None or len(robust_rngs) != s:
             got = None if robust_rngs is None else len(robust_rngs)
             raise ValueError(f"robust SD needs one generator per hand ({s}), got {got}")
         n = s if robust.grasps_per_config == 0 else min(s, robust.grasps_per_config)
-        perturbed = np.full((s, robust.perturbations), np.nan)
-        for i in range(n):
-            perturbed[i] = perturbed_displacements(sim, hand_vertices[i], faces, robust, robust_rngs[i], pose,
-                                                   gravity[i])
+        perturbed = np.full((s, k), np.nan)
+        if n:  # the n hands' K starts each, simulated as one batch (:func:`perturbed_displacements` per hand)
+            starts = [perturbed_starts(hand_vertices[i], robust, robust_rngs[i], sim.settings.solver_iterations)
+                      for i in range(n)]
+            sds = sim.displacements(np.concatenate([h for h, _ in starts]), faces, pose,
+                                    np.repeat(gravity[:n], k, axis=0), np.concatenate([it for _, it in starts]))
+            perturbed[:n] = sds.reshape(n, k)
         out["sd_perturbed"] = perturbed
     return out

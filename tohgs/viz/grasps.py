@@ -39,6 +39,8 @@ def pick_objects(names: list[str], n: int) -> list[str]:
 def _why(flags: dict[str, np.ndarray], i: int, g) -> str:
     reasons = []
     for c in CHECKS:
+        if c == "sd" and not np.isfinite(g.sd[i]):
+            continue  # not simulated: it failed the screen (energy or joints), listed below
         if not flags[c][i]:
             detail = {"pv": f"PV {g.pv[i] * 1e6:.1f} cm3", "sd": f"SD {g.sd[i] * 100:.1f} cm",
                       "contact": f"gap {g.contact_distance[i] * 1000:.0f} mm", "joints": "joint limits",

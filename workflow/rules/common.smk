@@ -17,6 +17,7 @@ from tohgs.config import (ConfigError, add_seed_replicas, drop_ground_truth_rows
                           settings_from, validate_config)
 from tohgs.assets.objects import check_split_sizes, read_catalog
 from tohgs.assets.sources import select_objects, task_set
+from tohgs.grasps.filter import SCREEN_KEYS
 from tohgs.data.official import read_import
 from tohgs.methods import method_components
 from tohgs.models import CHECKED_KINDS
@@ -57,7 +58,7 @@ else:
     try:
         OBJECTS = {spec.name: spec for spec in select_objects(config["objects"], config["seed"], skipped=SKIPPED_FILES)}
         check_split_sizes(Counter(spec.task_set for spec in OBJECTS.values()), config["objects"]["split"], TASK_SETS)
-    except (ValueError, FileNotFoundError) as err:
+    except (ValueError, FileNotFoundError, ModuleNotFoundError) as err:
         raise WorkflowError(f"invalid configuration: {err}") from None
 for _file, _reason in SKIPPED_FILES:
     print(f"objects.sources.dir: skipped {_file}: {_reason}", file=sys.stderr)
@@ -68,7 +69,7 @@ def imported(path):
     return os.path.join(OFFICIAL, path)
 
 
-OBJECT_NAME = "(pb|brick|dir|off)-[a-z0-9-]+"  # the {object} wildcard (tohgs.assets.sources, tohgs.data.official)
+OBJECT_NAME = "(pb|brick|dir|ycb|off)-[a-z0-9-]+"  # the {object} wildcard (tohgs.assets.sources, tohgs.data.official)
 
 
 def objects_dir_of_supports(wildcards, input):
@@ -196,6 +197,13 @@ def prior_stores(wildcards):
     """The filtered prior-grasp store of every accepted object (objects and bricks)."""
     catalog = catalog_frame()
     return expand("results/grasps/prior/{object}.zarr", object=sorted(catalog.name))
+
+
+def prior_screen(wildcards):
+    """The filter thresholds that screen the grasps before SD (prior_grasps.simulate: screened), or None."""
+    if config["prior_grasps"]["simulate"] != "screened":
+        return None
+    return {k: config["prior_grasps"]["filter"][k] for k in SCREEN_KEYS}
 
 
 def plane_direction(wildcards):

@@ -1,5 +1,6 @@
-# The prior-grasp stage: force-closure synthesis and metrics per object (expensive), then the filter
-# (cheap, so a threshold change reruns only it), a per-object summary and a picture; then the task
+# The prior-grasp stage: force-closure synthesis and metrics per object (expensive; SD only for the grasps
+# that pass the filter's energy and joint-limit checks), then the filter (cheap, so a PV, SD or contact
+# threshold change reruns only it), a per-object summary and a picture; then the task
 # expansion per task and object (generated data; rules/official.smk has the imported task grasps).
 
 
@@ -16,6 +17,7 @@ rule prior_synthesis:
         sd=setting("metrics", "sd"),
         voxel_pitch=setting("metrics", "voxel_pitch"),
         plane_direction=plane_direction,
+        screen=prior_screen,
         hand_model=setting("hand", "model"),
         seed=setting("seed"),
         cache_dir=setting("cache_dir"),

@@ -9,4 +9,4 @@ from tohgs.hand import HandAssets, HandModel  # noqa: E402
 p = snakemake.params
 make_prior_grasps(snakemake.input.object, HandModel(HandAssets.load(snakemake.input.hand)), p.hand_model, p.synthesis,
                   p.sdf, p.sd, p.voxel_pitch, p.plane_direction, p.seed, snakemake.output[0], p.cache_dir,
-                  snakemake.threads)
+                  snakemake.threads, screen=p.screen)
