@@ -37,6 +37,7 @@ import torch
 from tohgs.geometry.hand_object import (contact_values, distance_to_vertices, inside_hand, nearest_vertex,
                                        vertex_normals)
 from tohgs.hand.model import HandModel, HandOutput
+from tohgs.models.contact_net import ObjectCache
 
 OFFICIAL_POINTS = 3000  # the official code's object points: the point sums are scaled to this many
 
@@ -100,17 +101,33 @@ def by_problem(fn, sizes: list[int] | None, *args):
     return torch.cat(outs)
 
 
+def object_caches(contact_net, points: torch.Tensor, sizes: list[int] | None = None):
+    """ContactNet's :class:`tohgs.models.contact_net.ObjectCache` of (B, N, 3) object points, computed
+    problem by problem (consecutive ``sizes`` rows; :func:`by_problem`) without gradient: what does not
+    change while the hands move."""
+    with torch.no_grad():
+        parts = by_problem(lambda p: tuple(vars(contact_net.object_cache(p)).values()), sizes, points)
+    return ObjectCache(*parts)
+
+
 def tta_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_net, alpha: float,
                settings: TTASettings, object_features=None, nearest: torch.Tensor | None = None,
                sizes: list[int] | None = None) -> dict[str, torch.Tensor]:
     """The three weighted terms and their sum ``"energy"``, each (B,), of (B, 51) grasps on (B, N, 3)
-    object points; ``contact_net`` is a :class:`tohgs.models.contact_net.ContactNet` (its
-    ``object_features`` of the points may be given: they do not change while the hands move).
+    object points; ``contact_net`` is a :class:`tohgs.models.contact_net.ContactNet` (``object_features``,
+    its :class:`~tohgs.models.contact_net.ObjectCache` of the points (:func:`object_caches`), may be
+    given: it does not change while the hands move).
 
     ``nearest``: (B, N) each point's kept nearest hand vertex (module docstring); searched when not given.
     The returned dict holds the one used under ``"nearest"``, without gradient. ``sizes``: the hands of
-    each problem when several are solved together (:func:`pose_problems`)."""
+    each problem when several are solved together (:func:`pose_problems`).
+
+    ContactNet's map runs through its cached first layer (:meth:`~tohgs.models.contact_net.ContactNet.predict_map_cached`,
+    float32 rounding away from :meth:`~tohgs.models.contact_net.ContactNet.predict_map`) and the vertex
+    normals without gradient (they only decide which points are inside); the rest is the module
+    docstring's energy as written."""
     scale = OFFICIAL_POINTS / points.shape[1]
+    cache = object_caches(contact_net, points, sizes) if object_features is None else object_features
     verts = pose_problems(hand, grasp, sizes).vertices
     if nearest is None:
         c_hand, idx = contact_values(points, verts, alpha)
@@ -119,9 +136,11 @@ def tta_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, conta
         d = distance_to_vertices(points, verts, idx)
         c_hand = 1.0 - 2.0 * (torch.sigmoid(alpha * d) - 0.5)
     with torch.no_grad():
-        c_target = by_problem(contact_net.predict_map, sizes, points, verts, c_hand.detach(), object_features)
+        c_target = by_problem(lambda lo, gl, pr, v, c: contact_net.predict_map_cached(ObjectCache(lo, gl, pr), v, c),
+                              sizes, cache.local, cache.glob, cache.projected, verts, c_hand.detach())
+        normals = vertex_normals(verts, hand.closed_faces)
     consistency = 1e-4 * scale * ((c_hand - c_target) ** 2).sum(-1)
-    inside, offset = inside_hand(points, verts, vertex_normals(verts, hand.closed_faces), idx)
+    inside, offset = inside_hand(points, verts, normals, idx)
     penetration = 120.0 * scale * (inside * (offset**2).sum(-1)).sum(-1)
     d_candidates, _ = nearest_vertex(points, verts[:, hand.contact_ids])
     with torch.no_grad():  # the map is 1 - 2 (sigmoid(alpha d) - 0.5): d < r where the map exceeds its value at r
@@ -162,8 +181,7 @@ def adapt_many(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, conta
     g = clamp_to_limits(grasp.detach().clone(), hand.joint_limits).requires_grad_(True)
     opt = torch.optim.SGD([g], lr=settings.lr, momentum=settings.momentum)
     per_step: list[dict[str, torch.Tensor]] = []  # each step's (B,) terms, averaged per problem at the end
-    with torch.no_grad():
-        features = by_problem(contact_net.object_features, sizes, points)
+    features = object_caches(contact_net, points, sizes)
     nearest = None
     with torch.enable_grad():
         for step in range(settings.steps + 1):
