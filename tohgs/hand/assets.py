@@ -119,6 +119,12 @@ class HandAssets:
             translation: the rest vertex ``v`` skinned by joint ``j`` goes to ``R[j] (v - rest_joints[j]) +
             P[j]`` (before the pose blend shapes, which :meth:`vertices` adds in the rest frame).
         """
+        R, P = self._frames(pose)
+        return R, P + np.asarray(pose, dtype=np.float64)[:, None, :3]
+
+    def _frames(self, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`joint_frames` before the grasp's translation (which :meth:`vertices` adds last, so that its
+        vertices are the same numbers whether or not the frames are asked for)."""
         pose = np.asarray(pose, dtype=np.float64)
         if pose.ndim != 2 or pose.shape[1] != POSE_DIM:
             raise ValueError(f"pose must have shape (B, {POSE_DIM}), got {pose.shape}")
@@ -133,7 +139,7 @@ class HandAssets:
             ps = [PARENTS[k] for k in ks]
             R[:, ks] = R[:, ps] @ rot[:, ks]
             P[:, ks] = P[:, ps] + (R[:, ps] @ (j[ks] - j[ps])[None, :, :, None])[..., 0]
-        return R, P + pose[:, None, :3]
+        return R, P
 
     def vertices(self, pose: np.ndarray) -> np.ndarray:
         """Hand vertices of grasp vectors at zero betas, without torch.
@@ -148,7 +154,7 @@ class HandAssets:
         Returns:
             (B, V, 3) vertices, m.
         """
-        R, P = self.joint_frames(pose)
+        R, P = self._frames(pose)
         b = len(R)
         j = np.asarray(self.rest_joints, dtype=np.float64)
         v_rest = np.broadcast_to(np.asarray(self.rest_vertices, dtype=np.float64), (b,) + self.rest_vertices.shape)
@@ -158,7 +164,7 @@ class HandAssets:
             v_rest = v_rest + (feat @ np.asarray(self.pose_dirs, np.float64).reshape(-1, 135).T).reshape(b, -1, 3)
         A = np.concatenate([R, (P - (R @ j[None, :, :, None])[..., 0])[..., None]], -1)  # (B, 16, 3, 4)
         T = (np.asarray(self.weights, np.float64) @ A.reshape(b, N_JOINTS, 12)).reshape(b, -1, 3, 4)  # (B, V, 3, 4)
-        return (T[..., :3] @ v_rest[..., None])[..., 0] + T[..., 3]
+        return (T[..., :3] @ v_rest[..., None])[..., 0] + T[..., 3] + np.asarray(pose, dtype=np.float64)[:, None, :3]
 
     def save(self, path: str | Path) -> None:
         """Write to an ``.npz`` (atomically, byte-identical for identical assets: the archive's entries carry
