@@ -17,8 +17,8 @@ from tohgs.data.build_maps import make_map_shard, shard_items
 from tohgs.data.maps import SCHEMA_VERSION, MapDataset, read_map_shard
 from tohgs.data.scenes import write_scenes
 from tohgs.data.task_grasps import write_task_grasps
-from tohgs.geometry.maps import (farthest_point_sampling, farthest_point_sampling_reference, nearest_distance, nearest_distance_brute, normalised_map,
-                                 sample_surface, scene_cloud)
+from tohgs.geometry.maps import nearest_distance, nearest_distance_brute, normalised_map, sample_surface, scene_cloud
+from tohgs.geometry.sampling import farthest_point_sampling, farthest_point_sampling_reference
 from tohgs.grasps.expand import ExpansionSettings, expand_configurations
 from tohgs.hand import load_hand
 

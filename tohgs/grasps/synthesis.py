@@ -327,7 +327,7 @@ def vertex_subset(hand: HandModel, fraction: float) -> torch.Tensor | None:
         return None
     if fraction <= 0:
         raise ValueError(f"anneal_vertices must be in (0, 1], not {fraction}")
-    from tohgs.geometry.maps import farthest_point_sampling
+    from tohgs.geometry.sampling import farthest_point_sampling
 
     rest = hand.rest_vertices.detach().cpu().numpy()
     k = max(1, int(round(fraction * len(rest))))
