@@ -93,6 +93,22 @@ def _read_meta(meta_path: Path) -> dict[str, Any]:
     return _METAS[key]
 
 
+def _records(folder: Path, subject: str) -> dict[str, dict[str, Any]]:
+    """The file records of an objects ``folder``'s ``meta.json``; ``ValueError`` starting with ``subject``
+    where it has none (no ``meta.json``: not a folder of the objects stage, or an unfinished one; no records:
+    a folder of an older tohgs)."""
+    meta_path = folder / META_JSON
+    rerun = f"rerun the objects stage for '{folder.name}' (delete the folder)"
+    if not meta_path.is_file():
+        raise ValueError(f"{subject}no {META_JSON} in its folder, so nothing to check it against (not a folder of "
+                         f"the objects stage, or an unfinished one); {rerun}")
+    records = _read_meta(meta_path).get(FILES_KEY)
+    if not isinstance(records, dict):
+        raise ValueError(f"{subject}{meta_path} records no checksums of the folder's files (a folder of an older "
+                         f"tohgs); {rerun}")
+    return records
+
+
 def check_object_file(path: str | Path) -> dict[str, Any]:
     """Check one file of an objects folder against the record in the folder's ``meta.json``; returns the record.
 
@@ -107,13 +123,7 @@ def check_object_file(path: str | Path) -> dict[str, Any]:
     rerun = f"rerun the objects stage for '{folder.name}' (delete the folder)"
     if not path.is_file():
         raise ValueError(f"{path}: missing from the object's folder; {rerun}")
-    if not meta_path.is_file():
-        raise ValueError(f"{path}: no {META_JSON} beside it, so nothing to check it against (not a folder of the "
-                         f"objects stage, or an unfinished one); {rerun}")
-    records = _read_meta(meta_path).get(FILES_KEY)
-    if not isinstance(records, dict):
-        raise ValueError(f"{path}: {meta_path} records no checksums of the folder's files (a folder of an older "
-                         f"tohgs); {rerun}")
+    records = _records(folder, f"{path}: ")
     record = records.get(path.name)
     if not isinstance(record, dict) or "sha256" not in record:
         raise ValueError(f"{path}: not among the files {meta_path} records ({', '.join(sorted(records))}); {rerun}")
@@ -139,14 +149,7 @@ def check_faces(path: str | Path, n_faces: int, record: dict[str, Any]) -> None:
 def check_object_folder(folder: str | Path) -> None:
     """Check every file the folder's ``meta.json`` records (:func:`check_object_file`)."""
     folder = Path(folder)
-    meta_path = folder / META_JSON
-    if not meta_path.is_file():
-        raise ValueError(f"{folder}: no {META_JSON} (not a folder of the objects stage, or an unfinished one); "
-                         f"rerun the objects stage for '{folder.name}'")
-    records = _read_meta(meta_path).get(FILES_KEY)
-    if not isinstance(records, dict):
-        raise ValueError(f"{meta_path}: records no checksums of the folder's files (a folder of an older tohgs); "
-                         f"rerun the objects stage for '{folder.name}' (delete the folder)")
+    records = _records(folder, f"{folder}: ")
     for name in sorted(records):
         check_object_file(folder / name)
 

@@ -39,25 +39,33 @@ OBJECT_MESH = "mesh.obj"  # the normalised mesh in an object's folder of the obj
 OBJECT_URDF = "object.urdf"  # its URDF (mesh.obj as visual, collision.obj as collision, the mass properties)
 
 
+def _load_recorded(path: Path, name: str, what: str) -> trimesh.Trimesh:
+    """The mesh file ``path`` of object ``name``'s folder, loaded as written (``process=False``: merging
+    vertices would break seams), after checking it against the checksum its stage recorded; ``what`` names
+    it in the errors (the module's readers' Raises)."""
+    if not path.is_file():
+        raise ValueError(f"{path}: no {what} (is '{name}' an accepted object of the objects stage?)")
+    record = check_object_file(path)
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:
+        raise ValueError(f"{path}: unreadable {what} ({exc})") from exc
+    if len(mesh.faces) == 0:
+        raise ValueError(f"{path}: {what} without triangles")
+    check_faces(path, len(mesh.faces), record)
+    return mesh
+
+
 def object_mesh(objects_dir: str | Path, name: str) -> trimesh.Trimesh:
     """The normalised mesh of object ``name`` of the objects stage, ``<objects_dir>/<name>/mesh.obj``
     (metres, centre of mass at the origin), loaded as written (no merging: it would break seams), after
     checking the file against the checksum its stage recorded (:mod:`tohgs.assets.manifest`).
 
     Raises:
-        ValueError: the file is missing, unreadable, does not match its checksum, or loads with fewer faces
-            than recorded (the message names it).
+        ValueError: the file is missing, unreadable, has no triangles, does not match its checksum, or loads
+            with fewer faces than recorded (the message names it).
     """
-    path = Path(objects_dir) / name / OBJECT_MESH
-    if not path.is_file():
-        raise ValueError(f"{path}: no object mesh (is '{name}' an accepted object of the objects stage?)")
-    record = check_object_file(path)
-    try:
-        mesh = trimesh.load(path, force="mesh", process=False)
-    except Exception as exc:
-        raise ValueError(f"{path}: unreadable object mesh ({exc})") from exc
-    check_faces(path, len(mesh.faces), record)
-    return mesh
+    return _load_recorded(Path(objects_dir) / name / OBJECT_MESH, name, "object mesh")
 
 
 COLLISION_MESH = "collision.obj"  # the convex decomposition's parts in an object's folder (one ``o`` group each)
@@ -72,18 +80,7 @@ def collision_mesh(objects_dir: str | Path, name: str) -> trimesh.Trimesh:
         ValueError: the file is missing, unreadable, has no triangles, does not match its checksum or loads
             with fewer faces than recorded (the message names it).
     """
-    path = Path(objects_dir) / name / COLLISION_MESH
-    if not path.is_file():
-        raise ValueError(f"{path}: no collision parts (is '{name}' an accepted object of the objects stage?)")
-    record = check_object_file(path)
-    try:
-        mesh = trimesh.load(path, force="mesh", process=False)
-    except Exception as exc:
-        raise ValueError(f"{path}: unreadable collision parts ({exc})") from exc
-    if len(mesh.faces) == 0:
-        raise ValueError(f"{path}: collision parts without triangles")
-    check_faces(path, len(mesh.faces), record)
-    return mesh
+    return _load_recorded(Path(objects_dir) / name / COLLISION_MESH, name, "collision parts")
 
 
 class MeshError(ValueError):
