@@ -251,7 +251,7 @@ def test_faces_are_counted_without_parsing_the_file(tmp_path, suffix):
 
 
 def test_the_memory_of_the_objects_rule_covers_the_face_limit():
-    from tohgs.assets.objects import prepare_memory_mb
+    from tohgs.assets.memory import prepare_memory_mb
 
     cfg = validate_config({})
     assert prepare_memory_mb(cfg["objects"]["limits"]["max_faces"]) <= cfg["resources"]["rules"]["prepare_object"]["mem_mb"]

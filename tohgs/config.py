@@ -193,7 +193,7 @@ def _semantic_checks(cfg: Mapping[str, Any], base_dir: Path) -> None:
             p = base_dir / p
         if not p.is_dir():
             raise ConfigError(f"config key 'objects.sources.dir.path': folder '{dir_path}' does not exist")
-    from tohgs.assets.objects import prepare_memory_mb
+    from tohgs.assets.memory import prepare_memory_mb
 
     need = prepare_memory_mb(obj["limits"]["max_faces"])
     asked = cfg["resources"]["rules"].get("prepare_object", {}).get("mem_mb", need)

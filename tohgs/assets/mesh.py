@@ -91,7 +91,7 @@ class MeshError(ValueError):
 class MeshLimits:
     """The largest source mesh the objects stage takes (config ``objects.limits``), checked before the file is
     parsed: repairing and decomposing a mesh costs memory in proportion to its faces
-    (:func:`tohgs.assets.objects.prepare_memory_mb`), and a 10-million-face file once took 8.8 GB.
+    (:func:`tohgs.assets.memory.prepare_memory_mb`), and a 10-million-face file once took 8.8 GB.
 
     Attributes:
         max_faces: most triangles (a polygon of k corners counts k - 2, as it is triangulated).
