@@ -69,9 +69,10 @@ def test_the_import_replaces_the_generating_stages(official_run, capsys):
     with capsys.disabled():
         print(f"\nofficial smoke run to Table 1: {official_run.seconds:.0f} s")
     jobs, work = official_run.jobs, official_run.work
-    # every imported object (targets and the obstacle); the train target's scenes (the smoke config has no val
-    # shards); both targets' grasps (the dataset summary); the test JSON's configurations
-    assert jobs["official_object"] == 3 and jobs["official_scenes"] == 1 and jobs["official_task_grasps"] == 2
+    # every imported object (targets and the obstacle); both targets' scenes and grasps (the dataset summary
+    # reads them: its scene difficulty measures every configuration's obstacle gaps); the test JSON's
+    # configurations
+    assert jobs["official_object"] == 3 and jobs["official_scenes"] == 2 and jobs["official_task_grasps"] == 2
     assert jobs["official_test_scenes"] == 1 and jobs["supports"] == 1
     assert not {"prepare_object", "scenes", "prior_synthesis", "task_grasps"} & set(jobs)
     assert not (work / "results/grasps/prior").exists()

@@ -136,6 +136,7 @@ def _expected(cfg: dict) -> dict[str, dict[str, int]]:
         "model_checks": len(tasks) if checked else 0,
         "contact_maps_figure": 1, "predictions_figure": len(tasks), "table": len(tables),
         "claims": 1 if cfg["claims"] else 0, "all": 1,
+        "viewer": len(tasks) if cfg["figures"]["viewer"]["export"] else 0,
     }
     per_object = {  # the jobs the catalog reveals: per accepted object and per task and target object
         "scenes": sum(targets[t] for t in tasks),

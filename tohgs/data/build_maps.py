@@ -253,7 +253,8 @@ def scene_difficulty(task_grasp_stores: list[str | Path], scene_stores: list[str
                      n_points: int = 512, seed: int = 0) -> dict[str, dict[str, float]]:
     """How hard each task's scenes are, whatever method runs on them: per task (keys of the result)
 
-    - ``prior_accepted``: accepted prior grasps per target object (mean);
+    - ``prior_accepted``: accepted prior grasps per target object (mean; NaN for imported stores, which do
+      not record it, and so are ``rejected``, ``rejected_init`` and ``rejected_goal``);
     - ``rejected``, ``rejected_init``, ``rejected_goal``: the share of an object's accepted prior grasps the
       scene rejects at either pose, at the initial, at the goal pose (means over configurations; the last
       two NaN for an imported store, which does not record them);
@@ -276,8 +277,9 @@ def scene_difficulty(task_grasp_stores: list[str | Path], scene_stores: list[str
         arrays, attrs = read_task_grasps(p)
         task, name = attrs["task"], attrs["object"]
         t = per_task.setdefault(task, {k: [] for k in ("accepted", "rejected", "init", "goal", "has", "gap_init", "gap_goal")})
-        accepted = int(attrs.get("n_prior_accepted", 0))
-        t["accepted"].append(accepted)
+        recorded = attrs.get("n_prior_accepted")  # None for an imported store: its prior grasps are not known
+        accepted = int(recorded) if recorded is not None else 0
+        t["accepted"].append(float(accepted) if recorded is not None else np.nan)
         kept = arrays["kept_per_config"].astype(np.float64)
         if accepted > 0:
             t["rejected"] += (1 - kept / accepted).tolist()
