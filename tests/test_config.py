@@ -202,3 +202,25 @@ def test_an_import_without_ground_truth_leaves_out_exactly_the_rows_that_read_it
     cfg["tables"]["truth"] = {"rows": ["dataset"], "pending": []}
     with pytest.raises(ConfigError, match="tables.truth.rows"):
         drop_ground_truth_rows(cfg, "no truth here")
+
+
+def test_the_upright_overlay_adds_an_upright_row_and_leaves_the_faithful_one_in_so3(repo):
+    """config/upright.yaml over the default: `ours-upright`'s two components train about z only, with the
+    faithful components' steps and batches; `ours` and every built-in component keep the default SO(3)."""
+    from tohgs.methods import method_components
+
+    with open(repo / "config/config.yaml") as fh:
+        cfg = yaml.safe_load(fh)
+    with open(repo / "config/upright.yaml") as fh:
+        _deep_update(cfg, yaml.safe_load(fh))
+    cfg = validate_config(cfg, base_dir=repo)
+    comps, methods = cfg["components"], cfg["methods"]
+    assert cfg["training"]["rotation"] == "so3"
+    upright = method_components(methods["ours-upright"], comps)
+    faithful = method_components(methods["ours"], comps)
+    assert sorted(upright) == ["contact_diffuser_z", "grasp_diffuser_z"]
+    for z, so3 in zip(sorted(upright), sorted(faithful)):
+        assert comps[z]["kind"] == comps[so3]["kind"] and comps[z]["network"] == comps[so3]["network"]
+        assert {**comps[z]["training"], "rotation": None} == {**comps[so3]["training"], "rotation": None}
+        assert comps[z]["training"]["rotation"] == "z" and "rotation" not in comps[so3]["training"]
+    assert cfg["tables"]["upright"]["rows"] == ["ours", "ours-upright", "ours-gt-contact"]

@@ -48,7 +48,7 @@ LINE = 0.012  # m between the static export's metric lines
 #: The largest static export the report shows: it embeds the file as a base64 data: URL in a frame, and Chromium
 #: refuses URLs over 2 MiB (2,097,152 characters, 4/3 of the file).
 REPORT_BYTES = 1_500_000
-EXPORT_FACES = 4000  # most triangles of an object mesh in a static export (:func:`decimated`)
+EXPORT_FACES = 1500  # most triangles of an object mesh in a static export (:func:`decimated`; docs/viewer.md)
 
 
 def require_viser():
