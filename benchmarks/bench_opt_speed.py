@@ -34,7 +34,6 @@ import argparse
 import json
 import platform
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +42,7 @@ from scipy.stats import wilcoxon
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from base_commit import BASE_COMMIT, base_module, short_commit  # noqa: E402
-from bench_batched import configurations  # noqa: E402
+from bench_batched import configurations, timed  # noqa: E402
 
 from tohgs.config import validate_config  # noqa: E402
 from tohgs.geometry.contact_parts import PartContact  # noqa: E402
@@ -91,12 +90,6 @@ def quality(old: dict[str, np.ndarray], new: dict[str, np.ndarray], g_old: torch
     gap = (g_old - g_new).abs().amax(-1)
     return {"hands": int(len(gap)), "bit_for_bit_alike": int((gap == 0).sum()), "apart_over_1e-4": int((gap > 1e-4).sum()),
             "max_abs_grasp_difference": float((g_old - g_new).abs().max()), **{k: paired(old[k], new[k]) for k in old}}
-
-
-def timed(fn) -> float:
-    t0 = time.process_time()
-    fn()
-    return time.process_time() - t0
 
 
 def main() -> None:
