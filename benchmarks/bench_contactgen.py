@@ -4,8 +4,10 @@ and direction maps, then the two-stage solver, :mod:`tohgs.grasps.contactgen_sol
 Self-contained: the CVAE is built at the config's default sizes (the schema's; the cost does not depend on
 the weights) and the object is a synthetic capsule cloud of ``--points`` points (the default maps' 512),
 S = ``--samples`` grasps solved as one batch (the paper's 16), the solver's steps the schema's defaults
-unless ``--global-steps`` / ``--pose-steps`` are given (ContactGen's 200 + 1000), on the CPU with one
-thread and, where there is one, on CUDA. Writes ``benchmarks/results/contactgen.json`` (or ``--out``).
+unless ``--global-steps`` / ``--pose-steps`` are given (ContactGen's 200 + 1000), with each of the solver's
+distances (``surface``, the default, against ``vertex``, the nearest-vertex proxy it replaced: the same
+run, side by side), on the CPU with one thread and, where there is one, on CUDA. Writes
+``benchmarks/results/contactgen.json`` (or ``--out``), with the machine and the commit.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import sys
 import time
 from pathlib import Path
 
@@ -28,9 +31,11 @@ from tohgs.hand import load_hand
 from tohgs.models.component import build_component
 
 REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO / "benchmarks"))
+from base_commit import short_commit  # noqa: E402
 
 
-def run(device: torch.device, args, cfg: dict) -> dict:
+def run(device: torch.device, args, cfg: dict, distance: str) -> dict:
     hand = load_hand("anny").to(device)
     model = build_component("contact_gen", cfg["components"]["contact_gen"]["network"]).to(device).eval()
     pts, nrm = sample_surface(trimesh.creation.capsule(height=0.08, radius=0.03), args.points, np.random.default_rng(0))
@@ -44,7 +49,7 @@ def run(device: torch.device, args, cfg: dict) -> dict:
         solver["global_steps"] = args.global_steps
     if args.pose_steps is not None:
         solver["pose_steps"] = args.pose_steps
-    settings = SolverSettings(**solver)
+    settings = SolverSettings(**{**solver, "distance": distance})
     gen = torch.Generator().manual_seed(0)
     timings = []
     for rep in range(args.repeats + 1):
@@ -71,16 +76,18 @@ def main() -> None:
     ap.add_argument("--global-steps", type=int, default=None)
     ap.add_argument("--pose-steps", type=int, default=None)
     ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--distances", nargs="+", default=["vertex", "surface"], choices=["vertex", "surface"])
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "contactgen.json"))
     args = ap.parse_args()
     torch.set_num_threads(1)
     cfg = validate_config({})
     out = {"benchmark": "contactgen", "machine": platform.processor() or platform.machine(), "threads": 1,
-           "points": args.points, "samples_per_config": args.samples, "unit": "seconds", "devices": {}}
+           "commit": short_commit(), "points": args.points, "samples_per_config": args.samples, "unit": "seconds",
+           "devices": {}}
     devices = [torch.device("cpu")] + ([torch.device("cuda")] if torch.cuda.is_available() else [])
     for dev in devices:
         name = dev.type if dev.type == "cpu" else torch.cuda.get_device_name(0)
-        out["devices"][name] = run(dev, args, cfg)
+        out["devices"][name] = {d: run(dev, args, cfg, d) for d in args.distances}
         print(name, out["devices"][name], flush=True)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=2) + "\n")

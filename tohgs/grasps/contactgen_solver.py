@@ -4,14 +4,18 @@ representation (:mod:`tohgs.geometry.contact_parts`), by gradient descent on the
 Per hand (each of the B problems has its own energy, so that they are solved together and independently):
 
 - ``E_contact = w_contact sum_i c_i |s_i|``: ``s_i`` the signed distance of object point ``i`` to its
-  assigned hand part, ``c_i`` its contact value. ContactGen evaluates a learned per-part SDF of MANO; the
-  proxy here is the distance to the nearest vertex of the assigned part (the sign does not enter this
-  term). Only the points with ``c_i >= min_contact`` enter (the others weigh almost nothing and would cost
-  a search over the hand each);
+  assigned hand part, ``c_i`` its contact value. ContactGen evaluates a learned per-part SDF of MANO; here
+  (``distance: surface``) it is the distance to the closest point of the hand's surface around the
+  assigned part's nearest vertex (:mod:`tohgs.geometry.surface_distance`; ``distance: vertex``, the
+  distance to that vertex, which is 1-3 mm for a point lying on the surface between vertices). Only the
+  points with ``c_i >= min_contact`` enter (the others weigh almost nothing and would cost a search over
+  the hand each);
 - ``E_direction = w_direction sum_i (1 + c_i) (1 - cos(u_i, u*_i))``: ``u_i`` the point's direction in its
   part's frame for the current hand, ``u*_i`` the representation's;
-- ``E_penetration = w_penetration sum_i max(depth_i - 1 mm, 0)``: object points inside the hand (behind
-  their nearest vertex's outward normal), by their depth (ContactGen: the part SDFs below -1 mm);
+- ``E_penetration = w_penetration sum_i max(depth_i - 1 mm, 0)``: object points inside the hand by their
+  depth (ContactGen: the part SDFs below -1 mm). ``distance: surface``: the depth below the hand's surface
+  (the signed distance around the nearest vertex); ``vertex``: points behind their nearest vertex's outward
+  normal, by their distance to it, which counts a point on the surface as up to 3 mm deep;
 - ``E_pose = w_pose sum_k ((theta_k - mu_k) / sigma_k)^2`` over the 45 finger numbers, about the hand's
   pose prior (ContactGen regularises MANO's PCA coefficients, which are about the mean pose).
 
@@ -26,7 +30,8 @@ The point sums are scaled to ContactGen's 2048 points. Two stages with Adam (Con
 ``pose_steps`` on all 51 numbers with every term, the finger numbers clamped to the joint limits after
 each step. The start, unless given: the pose prior's mean, no global rotation, the palm's contact
 vertices centred on the object (ContactGen starts MANO at its origin, which its objects are centred on).
-ContactGen runs 200 + 1000 steps; those are settings (the laptop default is smaller).
+ContactGen's 200 + 1000 steps are the defaults (100 + 300 left the solver short of the ground truth's own
+grasps, docs/baselines.md).
 """
 
 from __future__ import annotations
@@ -37,10 +42,14 @@ import torch
 
 from tohgs.geometry.contact_parts import N_PARTS, PartContact, part_contact
 from tohgs.geometry.hand_object import distance_to_vertices, nearest_index, vertex_normals
+from tohgs.geometry.surface_distance import closest_faces, corner_normals, distance_to_faces, vertex_rings
 from tohgs.grasps.tta import clamp_to_limits, pose_problems, problem_histories
 from tohgs.hand.model import HandModel
 
 CONTACTGEN_POINTS = 2048  # ContactGen's object points: the point sums are scaled to this many
+DISTANCES = ("surface", "vertex")  # how the solver measures a point's distance to the hand (module docstring)
+RING_WIDTH = 32  # faces kept around a vertex: its two-ring (tohgs.geometry.surface_distance.vertex_rings)
+NEAR_HAND = 0.02  # m: a point farther from every hand vertex is outside the hand (its depth is not measured)
 
 
 @dataclass(frozen=True)
@@ -48,8 +57,8 @@ class SolverSettings:
     """The two stages and the weights (module docstring). ContactGen: 200 + 1000 steps, lr 5e-2 then
     5e-3, weights contact 0.1, penetration 3, direction 0.01, pose 0.01."""
 
-    global_steps: int = 100
-    pose_steps: int = 300
+    global_steps: int = 200
+    pose_steps: int = 1000
     global_lr: float = 5e-2
     pose_lr: float = 5e-3
     w_contact: float = 0.1
@@ -59,8 +68,11 @@ class SolverSettings:
     min_contact: float = 0.1
     max_contact_points: int = 256  # at most this many (the highest) contact points per hand enter E_contact
     search_every: int = 10  # steps between searches of the nearest hand vertices (1: every step)
+    distance: str = "surface"  # "surface": distances to the hand's surface; "vertex": to the nearest vertex
 
     def __post_init__(self):
+        if self.distance not in DISTANCES:
+            raise ValueError(f"distance must be one of {DISTANCES}, got {self.distance!r}")
         if self.global_steps < 0 or self.pose_steps < 0:
             raise ValueError("solver steps must be non-negative")
         if self.search_every < 1:
@@ -118,12 +130,21 @@ def solver_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, ta
     out = pose_problems(hand, grasp, sizes)
     idx, weight = contact_sel
     sel_points = torch.gather(points, 1, idx[..., None].expand(-1, -1, 3))
+    surface = s.distance == "surface"
     if search or "part" not in nearest:
         if "table" not in nearest:
             nearest["table"] = part_table(hand.part_labels)
         sel_part = torch.gather(target.part, 1, idx)
         nearest["part"] = nearest_part_vertex(sel_points, sel_part, out.vertices, nearest["table"])
-    d_part = distance_to_vertices(sel_points, out.vertices, nearest["part"])
+        if surface:
+            if "rings" not in nearest:
+                nearest["rings"] = vertex_rings(hand.closed_faces, hand.rest_vertices.shape[0], RING_WIDTH)
+            nearest["part_faces"] = closest_faces(sel_points, out.vertices, hand.closed_faces, nearest["rings"],
+                                                  nearest["part"])
+    if surface:
+        d_part = distance_to_faces(sel_points, out.vertices, nearest["part_faces"])
+    else:
+        d_part = distance_to_vertices(sel_points, out.vertices, nearest["part"])
     terms = {"contact": s.w_contact * scale * (weight * d_part).sum(-1)}
     # the current directions of every point in its target part's frame (the nearest-vertex part and the
     # contact of part_contact are not used here: the parts are the target's)
@@ -138,11 +159,20 @@ def solver_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, ta
             with torch.no_grad():  # the normals only decide which points are inside: kept with the index
                 normals = vertex_normals(out.vertices.detach(), hand.closed_faces)
                 nearest["normal"] = torch.gather(normals, 1, idx_h[..., None].expand(-1, -1, 3))
-        near = torch.gather(out.vertices, 1, nearest["hand"][..., None].expand(-1, -1, 3))
-        offset = points - near
-        inside = ((offset * nearest["normal"]).sum(-1) < 0).float()
-        depth = offset.norm(dim=-1)
-        terms["penetration"] = s.w_penetration * scale * (inside * (depth - 1e-3).clamp_min(0)).sum(-1)
+                if surface:  # the face of each point's closest surface point, and its corners' normals
+                    near = distance_to_vertices(points, out.vertices, idx_h) < NEAR_HAND
+                    nearest["near"] = near.to(points.dtype)
+                    nearest["hand_faces"] = closest_faces(points, out.vertices, hand.closed_faces, nearest["rings"],
+                                                          idx_h, near)
+                    nearest["hand_normals"] = corner_normals(out.vertices, hand.closed_faces, nearest["hand_faces"])
+        if surface:
+            sd = distance_to_faces(points, out.vertices, nearest["hand_faces"], nearest["hand_normals"])
+            depth_beyond = nearest["near"] * (-sd - 1e-3).clamp_min(0)
+        else:
+            offset = points - torch.gather(out.vertices, 1, nearest["hand"][..., None].expand(-1, -1, 3))
+            inside = ((offset * nearest["normal"]).sum(-1) < 0).float()
+            depth_beyond = inside * (offset.norm(dim=-1) - 1e-3).clamp_min(0)
+        terms["penetration"] = s.w_penetration * scale * depth_beyond.sum(-1)
         mu = torch.as_tensor(hand.assets.prior_mean, dtype=grasp.dtype, device=grasp.device)
         sigma = torch.as_tensor(hand.assets.prior_std, dtype=grasp.dtype, device=grasp.device).clamp_min(1e-3)
         terms["pose"] = s.w_pose * (((grasp[:, 6:] - mu) / sigma) ** 2).sum(-1)
