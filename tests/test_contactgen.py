@@ -174,3 +174,39 @@ def test_kept_correspondences_solve_as_well_as_searching_every_step(built):  # n
     assert ends[10] < 1.15 * ends[1], ends
     with pytest.raises(ValueError, match="search_every"):
         SolverSettings(search_every=0)
+
+
+def test_the_ground_truth_gate_solves_the_representation_of_the_datasets_own_grasps(built):  # noqa: F811
+    """``model: ground_truth`` (the solver's gate): per configuration the representation of the grasps the
+    Dataset row evaluates (ground_truth_pick), solved from the default start; the hands come back near those
+    grasps (closer than the start), and a configuration without task grasps is not predicted."""
+    from tohgs.data.maps import read_map_shard
+    from tohgs.methods.base import PredictSettings, Request, ground_truth_pick
+    from tohgs.methods.contact_gen import ContactGenMethod
+
+    tmp, hand, _, _, _ = built
+    shard = read_map_shard(tmp / "shard-0.zarr")
+    data = MapDataset([tmp / "shard-0.zarr"], per="config")
+    cpu = torch.device("cpu")
+    s = PredictSettings(samples=3, seed=1, device="cpu", contactgen={"global_steps": 40, "pose_steps": 100})
+    gate = ContactGenMethod("contactgen-gt", {"kind": "contact_gen", "model": "ground_truth"}, {}, s, cpu, hand)
+    requests = [Request(Batch.collate([data[row]], cpu).repeat(3), shard, row, torch.Generator().manual_seed(0),
+                        np.random.default_rng(0)) for row in range(shard.n_configs)]
+    preds = gate.predict_many(requests)
+    assert len(preds) == shard.n_configs
+    for row, pred in enumerate(preds):
+        ids = ground_truth_pick(shard, row, 3, 1)
+        truth = torch.as_tensor(shard.grasp[ids], dtype=torch.float32)
+        with torch.no_grad():
+            v_true = hand(truth).vertices
+            err = (hand(torch.as_tensor(pred.grasp, dtype=torch.float32)).vertices - v_true).norm(dim=-1).mean()
+            start = default_start(hand, 3)
+            err_start = (hand(start).vertices - v_true).norm(dim=-1).mean()
+        assert float(err) < 0.3 * float(err_start), (row, float(err), float(err_start))
+        np.testing.assert_allclose(pred.contact, representation_of(
+            hand, truth, requests[row].batch.points, float(shard.attrs["alpha_contact"])).contact.numpy(), atol=1e-6)
+    # no task grasps: no prediction (the tables count the configuration as missing)
+    empty = type(shard)({**shard.arrays, "grasp_config": np.full_like(shard.grasp_config, -1)}, shard.attrs)
+    assert gate.predict_many([Request(requests[0].batch, empty, 0, requests[0].generator, requests[0].rng)]) == [None]
+    with pytest.raises(ValueError, match="not among the trained components"):
+        ContactGenMethod("contactgen", {"kind": "contact_gen", "model": "contact_gen"}, {}, s, cpu, hand)

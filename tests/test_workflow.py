@@ -271,11 +271,11 @@ def _n_scenes(smoke_run) -> int:
 
 N_MAPS = 6  # 3 tasks x (1 train + 1 test) shards in the smoke config (no validation shards)
 # The smoke config's 9 components (contact_diffuser, grasp_diffuser, scene_diffuser, grasp_cvae,
-# m_grasp_cvae, contact_net, contact_gen, contact_cvae, pose_prior) and 11 methods (dataset, grasptta,
-# f-grasptta, contactgen, scenediffuser, flex, ours, m-grasptta-oc, m-grasptta-ta, m-grasptta-gt, cc-gd),
-# per task; a check per task; 4 tables (table1,
-# table2, table4, table5), each with a row of every task.
-N_COMPONENTS, N_METHODS, N_TABLES = 9, 11, 4
+# m_grasp_cvae, contact_net, contact_gen, contact_cvae, pose_prior) and 12 methods (dataset, grasptta,
+# f-grasptta, contactgen, contactgen-gt, scenediffuser, flex, ours, m-grasptta-oc, m-grasptta-ta, m-grasptta-gt,
+# cc-gd), per task; a check per task; 5 tables (table1, table2, table4, table5, contactgen_gate), each with a
+# row of every task; the first 4 have a row from ContactDiffuser or GraspDiffuser (ours), the gate none.
+N_COMPONENTS, N_METHODS, N_TABLES, N_TABLES_OF_OURS = 9, 12, 5, 4
 MODELS = {"train": 3 * N_COMPONENTS, "predict": 3 * N_METHODS, "model_checks": 3}
 # The evaluation of every task's predictions (and the viewer's static export of each task, rule viewer, which
 # draws every table row's predictions with their metrics).
@@ -283,10 +283,11 @@ EVALUATION = {"evaluate": 3 * N_METHODS, "table": N_TABLES, "claims": 1, "predic
               "viewer": 3}
 
 
-def _evaluated(methods_per_task: int, tasks: int = 3) -> dict[str, int]:
+def _evaluated(methods_per_task: int, tasks: int = 3, tables: int = N_TABLES_OF_OURS) -> dict[str, int]:
     """The evaluation jobs after ``methods_per_task`` prediction stores of ``tasks`` tasks changed (the
-    figures read ``ours`` of every task; every table has a row read from ``ours``)."""
-    return {"evaluate": methods_per_task * tasks, "table": N_TABLES, "claims": 1, "predictions_figure": tasks,
+    figures read ``ours`` of every task; ``tables`` tables have a changed row: those with a row read from
+    ``ours`` unless said)."""
+    return {"evaluate": methods_per_task * tasks, "table": tables, "claims": 1, "predictions_figure": tasks,
             "contact_maps_figure": 1, "viewer": tasks}
 
 
@@ -398,7 +399,7 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
                                                          "task_grasps": n_stacking, "maps": _fed_shards(smoke_run, ("stacking",)),
                                                          "dataset_summary": 1, "maps_figure": 1, "train": N_COMPONENTS,
                                                          "predict": N_METHODS, "model_checks": 1,
-                                                         **_evaluated(N_METHODS, tasks=1),
+                                                         **_evaluated(N_METHODS, tasks=1, tables=N_TABLES),
                                                          "contact_maps_figure": 1}
     # A hand setting concerns the hand only (a MANO file needs a path that exists).
     (smoke_run / "MANO_RIGHT.pkl").write_bytes(b"")
