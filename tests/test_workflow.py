@@ -79,6 +79,10 @@ def test_every_training_split_has_task_grasps_with_margin(smoke_run, capsys):
 # (pooled feature only, network frame) gave 0.005 at the default scale (docs/graspdiffuser.md).
 MIN_GRASP_CONTEXT_GAP = 0.08
 MIN_CONTACT_GAP = 0.015
+# ContactDiffuser's permuted-map gap (its loss on maps whose values are permuted across the points): 0.015,
+# 0.082 and 0.029 on the three tasks of a smoke run at 8749e89, untrained copies -0.001 (docs/results.md has
+# the default run's).
+MIN_PERMUTED_GAP = 0.007
 # SceneDiffuser (a GraspDiffuser reading the object alone) is not held to a gap here: at the smoke size it
 # barely reads its object (gap_context 0.0003-0.0015 on the three tasks at 400 steps of d_model 32), and an
 # object-only generator has much less to read than one given a contact map. That it learns its condition
@@ -92,7 +96,7 @@ def test_the_smoke_models_read_their_condition_and_untrained_copies_do_not(smoke
     from tohgs.data.maps import MapDataset
     from tohgs.hand import HandAssets, HandModel
     from tohgs.models.checkpoint import load_component
-    from tohgs.models.checks import shuffled_condition_gap
+    from tohgs.models.checks import permuted_map_gap, shuffled_condition_gap
     from tohgs.models.component import build_component
     from tohgs.models.grasp_diffuser import seen_grasps
 
@@ -104,6 +108,7 @@ def test_the_smoke_models_read_their_condition_and_untrained_copies_do_not(smoke
         assert gd["shuffled_condition"]["gap_context"] > MIN_GRASP_CONTEXT_GAP, (task, gd["shuffled_condition"])
         assert math.isfinite(sd["shuffled_condition"]["gap_context"]) and sd["fit"]["grasps"] > 0, (task, sd)
         assert cd["shuffled_condition"]["gap"] > MIN_CONTACT_GAP, (task, cd["shuffled_condition"])
+        assert cd["permuted_map"]["gap"] > MIN_PERMUTED_GAP, (task, cd["permuted_map"])
         assert gd["fit"]["grasps"] > 0 and 0 <= gd["fit"]["touch_rate"] <= 1
         # The same measurement on an untrained copy fails: the gap is the network's, not the data's.
         shards = sorted((smoke_run / f"results/maps/{task}/train").glob("shard-*.zarr"))
@@ -117,6 +122,8 @@ def test_the_smoke_models_read_their_condition_and_untrained_copies_do_not(smoke
                 fresh.set_hand(hand)
                 fresh.set_normaliser(seen_grasps(fresh, seen, torch.device("cpu")))
             assert abs(shuffled_condition_gap(fresh, seen)[key]) < bound, (task, name)
+            if name == "contact_diffuser":  # nor does it tell true maps from permuted ones
+                assert abs(permuted_map_gap(fresh, seen)["gap"]) < MIN_PERMUTED_GAP / 2, task
 
 
 def test_smoke_run_outputs(smoke_run):
