@@ -210,3 +210,27 @@ def test_the_ground_truth_gate_solves_the_representation_of_the_datasets_own_gra
     assert gate.predict_many([Request(requests[0].batch, empty, 0, requests[0].generator, requests[0].rng)]) == [None]
     with pytest.raises(ValueError, match="not among the trained components"):
         ContactGenMethod("contactgen", {"kind": "contact_gen", "model": "contact_gen"}, {}, s, cpu, hand)
+
+
+def test_the_representation_check_sees_a_collapsed_contact_latent(built):  # noqa: F811
+    """model_checks' representation_fit: a ContactGen whose contact decoder ignores its latent (a collapsed
+    posterior) draws one map for every sample (sample IoU 1); the same network reading its latent does not;
+    the part histogram is compared where there is contact, and the curve's last KLs are reported."""
+    from tohgs.models.checks import representation_fit
+
+    tmp, hand, _, _, _ = built
+    model, _ = _prepared("contact_gen", CONTACT_GEN, tmp / "shard-0.zarr", hand)
+    model.eval()
+    data = MapDataset([tmp / "shard-0.zarr"], per="grasp")
+    with torch.no_grad():  # a contact map of about half the points, varying with the latent
+        model.contact_stage.decoder[-1].bias.fill_(0.0)
+        model.contact_stage.decoder[-1].weight.mul_(20.0)
+    curve = [{"kl_contact": 0.5, "kl_part": 1.0, "kl_direction": 2.0}]
+    reads = representation_fit(model, hand, data, curve, samples=4)
+    assert 0.05 < reads["contact_fraction"] < 0.95 and reads["sample_iou_median"] < 0.9, reads
+    assert 0 <= reads["part_tv"] <= 1 and reads["kl_direction"] == 2.0
+    first = model.contact_stage.decoder[0]
+    with torch.no_grad():  # the decoder's first layer reads [features, z]: cut the latent's columns
+        first.weight[:, -model.cfg.latent:] = 0
+    collapsed = representation_fit(model, hand, data, curve, samples=4)
+    assert collapsed["sample_iou_median"] == 1.0, collapsed

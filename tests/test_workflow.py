@@ -110,6 +110,9 @@ def test_the_smoke_models_read_their_condition_and_untrained_copies_do_not(smoke
         assert cd["shuffled_condition"]["gap"] > MIN_CONTACT_GAP, (task, cd["shuffled_condition"])
         assert cd["permuted_map"]["gap"] > MIN_PERMUTED_GAP, (task, cd["permuted_map"])
         assert gd["fit"]["grasps"] > 0 and 0 <= gd["fit"]["touch_rate"] <= 1
+        for name in ("contact_gen", "contact_cvae"):  # ContactGen's representations are measured, not held
+            fit = checks[name]["fit"]
+            assert fit["configs"] > 0 and 0 <= fit["contact_fraction"] <= 1 and "kl_contact" in fit, (task, name, fit)
         # The same measurement on an untrained copy fails: the gap is the network's, not the data's.
         shards = sorted((smoke_run / f"results/maps/{task}/train").glob("shard-*.zarr"))
         seen = MapDataset(shards, per="grasp", rotation="z", seed=0)

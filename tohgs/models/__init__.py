@@ -7,7 +7,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-CHECKED_KINDS = ("contact_diffuser", "grasp_diffuser")  # component kinds with conditioning checks (checks.py)
+CHECKED_KINDS = ("contact_diffuser", "grasp_diffuser", "contact_gen")  # component kinds with checks (checks.py)
 _MODELS_DIR = Path(__file__).resolve().parent
 _KIND = re.compile(r"[a-z][a-z0-9_]*")
 

@@ -10,6 +10,10 @@
   point's own value (per-point marginals) has the same loss on both; one that learnt where contact lies on
   the object, and that it comes in regions, does worse on the permuted maps.
 - :func:`contact_fit`: ContactDiffuser's maps against the configuration's ground-truth maps (IoU).
+- :func:`representation_fit`: ContactGen's (and ContactCVAE's) sampled representations against the
+  configuration's true ones: the contact IoU as :func:`contact_fit`, how alike its samples are (a collapsed
+  latent draws one map), the part labels' histogram over the contact points against the truth's, and each
+  stage's KL at the end of training.
 - :func:`grasp_fit`: grasps sampled from ground-truth contact maps of training configurations, compared
   with the configuration's ground-truth grasps: whether the hand touches the object (some hand vertex within
   ``touch`` of the object cloud), how deep it enters it, and how far its wrist is from the nearest
@@ -265,6 +269,72 @@ def contact_fit(model, data: MapDataset, max_configs: int = 24, samples: int = 4
             "true_contact_fraction": float(np.mean(true_frac)) if true_frac else math.nan}
 
 
+@torch.no_grad()
+def representation_fit(model, hand: HandModel, data: MapDataset, curve: list[dict] | None = None,
+                       max_configs: int = 24, samples: int = 4, threshold: float = 0.5, seed: int = 0) -> dict:
+    """A ContactGen (``contact_gen`` kind) model's sampled representations for configurations of ``data``
+    against the true ones of the configuration's grasps (module docstring).
+
+    Returns:
+        ``iou_median`` / ``other_config_iou_median`` / ``contact_fraction`` / ``true_contact_fraction`` as
+        :func:`contact_fit`; ``sample_iou_median``, the median IoU between two samples of one configuration
+        (1: the samples are one map); with parts, ``part_tv``, the total variation distance between the
+        part labels' histograms over the sampled and the true contact points (0: the same use of the hand's
+        parts; NaN when the samples have no point in contact), and ``part_agreement``, the share of points in contact in both a sample and its best true
+        map that carry the same part; ``kl_<stage>``, each stage's KL at the last step of ``curve`` (the
+        checkpoint's loss curve).
+    """
+    from tohgs.geometry.contact_parts import N_PARTS, part_contact
+
+    g = torch.Generator().manual_seed(seed)
+    by_config: dict[tuple[int, int], list[int]] = {}
+    for i, (s, r) in enumerate(data.index):
+        by_config.setdefault((s, int(data.shards[s].grasp_config[r])), []).append(i)
+    keys = list(by_config)[:max_configs]
+    alpha = float(data.shards[0].attrs["alpha_contact"])
+    ious, base, frac, true_frac, alike, agree = [], [], [], [], [], []
+    hist_s, hist_t = torch.zeros(N_PARTS), torch.zeros(N_PARTS)
+    for s, c in keys:
+        items = [data[i] for i in by_config[(s, c)]]
+        truth = Batch.collate(items)
+        true = truth.contact > threshold  # (G, N)
+        obj = int(data.shards[s].object_id[c])
+        others = [i for (s2, c2), ids in by_config.items() if (s2, c2) != (s, c)
+                  and int(data.shards[s2].object_id[c2]) == obj and data.shards[s2].attrs["objects"] == data.shards[s].attrs["objects"]
+                  for i in ids]
+        if others:
+            other = torch.as_tensor(np.stack([data[i]["contact"] for i in others])) > threshold
+            base += _iou(other, true).max(-1).values.tolist()
+        rep = model.sample_representation(Batch.collate([items[0]] * samples), g)
+        pred = rep.contact > threshold  # (S, N)
+        iou = _iou(pred, true)  # (S, G)
+        ious += iou.max(-1).values.tolist()
+        pair = _iou(pred, pred)
+        alike += pair[~torch.eye(samples, dtype=torch.bool)].tolist()
+        frac.append(float(pred.float().mean()))
+        true_frac.append(float(true.float().mean()))
+        if rep.part is not None:
+            out = hand(truth.grasp)
+            true_part = part_contact(truth.points, out.vertices, out.joints, out.rotations, hand.part_labels, alpha).part
+            hist_s += torch.bincount(rep.part[pred], minlength=N_PARTS).float()
+            hist_t += torch.bincount(true_part[true], minlength=N_PARTS).float()
+            best = iou.argmax(-1)  # each sample's best true map
+            both = pred & true[best]
+            if both.any():
+                agree.append(float((rep.part == true_part[best])[both].float().mean()))
+    med = lambda v: float(np.median(v)) if v else math.nan  # noqa: E731
+    result = {"configs": len(keys), "iou_median": med(ious), "other_config_iou_median": med(base),
+              "sample_iou_median": med(alike), "contact_fraction": float(np.mean(frac)) if frac else math.nan,
+              "true_contact_fraction": float(np.mean(true_frac)) if true_frac else math.nan}
+    if model.cfg.parts:
+        ps, pt = hist_s / hist_s.sum().clamp_min(1), hist_t / hist_t.sum().clamp_min(1)
+        tv = float(0.5 * (ps - pt).abs().sum()) if hist_s.sum() > 0 and hist_t.sum() > 0 else math.nan
+        result.update(part_tv=tv, part_agreement=med(agree))
+    last = (curve or [{}])[-1]
+    result.update({k: float(last[k]) for k in ("kl_contact", "kl_part", "kl_direction") if k in last})
+    return result
+
+
 def model_checks(task: str, shard_paths: list[str | Path], checkpoints: dict[str, str | Path], hand: HandModel,
                  out: str | Path, seed: int = 0) -> dict:
     """Both measurements for each of a task's trained diffusers (``checkpoints``: by component name) on their
@@ -278,6 +348,11 @@ def model_checks(task: str, shard_paths: list[str | Path], checkpoints: dict[str
         model, meta = load_component(ckpt, task=task, component=name)
         if model.kind not in CHECKED_KINDS:
             result[name] = {"kind": model.kind, "checks": "none for this kind"}
+            continue
+        if model.kind == "contact_gen":
+            result[name] = {"kind": model.kind, "fit": representation_fit(model, hand, plain, meta.get("loss_curve"),
+                                                                          seed=seed)}
+            log.info("%s/%s: %s", task, name, result[name])
             continue
         # the gap is measured on what the model was trained on: its own augmentation
         seen = MapDataset(shard_paths, per="grasp", rotation=meta["training_config"]["rotation"], seed=seed)
