@@ -28,6 +28,7 @@ import pandas as pd
 import pytest
 import yaml
 from workflow_tools import copy_workflow, job_stats, workflow_env
+from tohgs.models import CHECKED_KINDS
 
 REPO = Path(__file__).resolve().parent.parent
 PAPER = "config/paper.yaml"
@@ -125,7 +126,7 @@ def _expected(cfg: dict) -> dict[str, dict[str, int]]:
 
     n_train = len(comps(first_seed)) + (seeds - 1) * len(comps(replicated))
     n_predict = len(first_seed) + (seeds - 1) * len(replicated)
-    checked = {c for c in comps(first_seed) if components[c]["kind"] in ("contact_diffuser", "grasp_diffuser")}
+    checked = {c for c in comps(first_seed) if components[c]["kind"] in CHECKED_KINDS}
     every_time = {  # the jobs known before the checkpoint, in both dry runs (nothing exists yet)
         "hand_model": 1, "supports": 1, "hand_figure": 1, "objects_figure": 1, "prior_figure": 1,
         "prior_summary": 1, "scenes_figure": len(tasks), "dataset_summary": 1, "maps_figure": 1,
