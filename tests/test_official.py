@@ -319,6 +319,23 @@ def test_names_that_sanitise_alike_are_a_problem_naming_both_files(tree, hand, t
     assert mug.attrs["official"]["names"]["off-box-c"] == "Box_C"
 
 
+def test_the_command_line_writes_what_the_library_writes(tree, hand, tmp_path, capsys):
+    """``python -m tohgs.official import`` (its main, in this process) writes the files import_official writes,
+    byte for byte, prints the counts and exits 1 when a file could not be used."""
+    from tohgs.official.__main__ import main
+
+    rc = main(["import", str(tree["root"]), str(tmp_path / "cli"), "--tasks", "placing", "--hand", "anny"])
+    report = import_official(tree["root"], tmp_path / "lib", hand, ["placing"])
+
+    def files(d: Path) -> dict[Path, bytes]:  # the report names its own output folder
+        return {p.relative_to(d): p.read_bytes() for p in sorted(d.rglob("*")) if p.is_file()
+                and p.name != "import_report.json"}
+
+    assert files(tmp_path / "cli") == files(tmp_path / "lib") and len(files(tmp_path / "lib")) > 10
+    assert rc == 1 and report.n_problems == 1  # the unreadable broken.npy
+    assert f"{report.files_read} files read, 1 problems" in capsys.readouterr().out
+
+
 def test_a_failed_reimport_leaves_the_earlier_import_whole(tree, hand, tmp_path, monkeypatch):
     """A re-import that fails half-way once left new objects next to old scenes and grasps; now an import is
     written into a temporary folder and renamed into place only when complete."""
