@@ -1,6 +1,7 @@
 # Two commands on a fresh machine (see README.md):
 #   make reproduce   set up .venv, then run the workflow on the embedded default config
 #   make test        set up .venv with test tools, then pytest (with the end-to-end smoke run), lint, dry run
+# While developing: make test-fast   the unit tests only (pytest -m "not slow": no workflow runs)
 PYTHON ?= python3
 VENV ?= .venv
 CORES ?= 2
@@ -9,7 +10,7 @@ PY := $(VENV)/bin/python
 SNAKEMAKE := $(PY) -m snakemake
 STAMP := $(VENV)/.tohgs-setup
 
-.PHONY: reproduce test setup browser lint dryrun benchmark report clean
+.PHONY: reproduce test test-fast setup browser lint dryrun benchmark report clean
 
 reproduce: $(STAMP)
 	$(SNAKEMAKE) --cores $(CORES) $(TARGET)
@@ -18,6 +19,10 @@ test: $(STAMP) browser
 	$(PY) -m pytest -p no:dash
 	$(SNAKEMAKE) --lint
 	$(SNAKEMAKE) --dry-run --quiet rules --cores $(CORES) $(TARGET)
+
+# the unit tests without the slow ones (the end-to-end workflow runs, marked slow: pyproject.toml)
+test-fast: $(STAMP)
+	$(PY) -m pytest -p no:dash -m "not slow"
 
 setup: $(STAMP)
 

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 import yaml
 
-from tests.workflow_tools import copy_workflow, workflow_env
+from workflow_tools import copy_workflow, workflow_env
 from tohgs.assets.sources import ObjectSpec
 from tohgs.config import SEED_MAX, ConfigError, _finite_numbers, validate_config
 
@@ -92,10 +92,10 @@ def test_a_yaml_billion_laughs_is_refused_before_anything_iterates_over_it():
 @pytest.fixture(scope="module")
 def brick_folder(tmp_path_factory) -> Path:
     """The objects stage's folder of the cube brick (fast decomposition settings)."""
-    from tests.test_objects import _prepare
+    from helpers import prepare_small_object
 
     out = tmp_path_factory.mktemp("objects")
-    meta = _prepare(ObjectSpec("brick-cube", "bricks", "stacking", None, "cube"), out / "brick-cube", None)
+    meta = prepare_small_object(ObjectSpec("brick-cube", "bricks", "stacking", None, "cube"), out / "brick-cube", None)
     assert meta["status"] == "ok"
     return out / "brick-cube"
 
@@ -343,7 +343,7 @@ def test_a_file_named_with_braces_no_longer_stops_the_workflow(tmp_path):
 
 def _checkpoints(folder: Path, task: str) -> dict[str, Path]:
     """Untrained checkpoints of the tiny ContactDiffuser and GraspDiffuser of tests/test_train.py for ``task``."""
-    from tests.test_train import TINY
+    from helpers import TINY
     from tohgs.models.checkpoint import save_checkpoint
     from tohgs.models.component import build_component
 
@@ -356,7 +356,7 @@ def _checkpoints(folder: Path, task: str) -> dict[str, Path]:
 
 
 def test_a_checkpoint_of_another_task_or_component_is_refused(tmp_path):
-    from tests.test_train import OURS
+    from helpers import OURS
     from tohgs.methods.predict import predict
     from tohgs.models.checkpoint import load_component
 

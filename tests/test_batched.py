@@ -11,7 +11,7 @@ import pytest
 import torch
 import trimesh
 
-from tests.test_flex import _prior
+from helpers import near_object, pose_prior
 from tohgs.data.batch import Batch
 from tohgs.geometry.contact_parts import PartContact
 from tohgs.geometry.maps import sample_surface
@@ -58,23 +58,12 @@ def _scene(points: torch.Tensor, shift: float) -> tuple[torch.Tensor, torch.Tens
             torch.as_tensor(goal, dtype=torch.float32))
 
 
-def _near_object(hand, points: torch.Tensor, n: int, seed: int) -> torch.Tensor:
-    """(n, 51) relaxed hands with the palm near the object's surface, turned at random."""
-    gen = torch.Generator().manual_seed(seed)
-    g = hand.preset("relaxed", n).clone()
-    g[:, 3:6] += 0.4 * torch.randn(n, 3, generator=gen)
-    with torch.no_grad():
-        palm = hand(g).vertices[:, hand.assets.palm_ids].mean(1)
-    g[:, :3] += points[torch.randint(0, len(points), (n,), generator=gen)] - palm
-    return g
-
-
 def test_tta_of_several_configurations_equals_each_alone(hand):
     torch.manual_seed(0)
     net = build_component("contact_net", {"object_mlp": [16], "hand_mlp": [16], "head": [16]}).eval()
     sizes = [3, 3, 3]  # S hands each, as in a prediction job (module docstring of tohgs.grasps.tta: unequal sizes)
     objects = _objects()
-    grasps = [_near_object(hand, p, n, seed) for seed, ((p, _), n) in enumerate(zip(objects, sizes))]
+    grasps = [near_object(hand, p, n, seed) for seed, ((p, _), n) in enumerate(zip(objects, sizes))]
     points = [p[None].expand(n, -1, -1) for (p, _), n in zip(objects, sizes)]
     s = TTASettings(steps=12)
     alone = [adapt(hand, g, p, net, 100.0, s) for g, p in zip(grasps, points)]
@@ -92,7 +81,7 @@ def test_contactgen_solver_of_several_configurations_equals_each_alone(hand):
     reps, points = [], []
     for seed, ((p, _), n) in enumerate(zip(objects, sizes)):
         pts = p[None].expand(n, -1, -1)
-        reps.append(representation_of(hand, _near_object(hand, p, n, 10 + seed), pts, 100.0))
+        reps.append(representation_of(hand, near_object(hand, p, n, 10 + seed), pts, 100.0))
         points.append(pts)
     s = SolverSettings(global_steps=8, pose_steps=16, search_every=3, max_contact_points=32)
     alone = [solve(hand, p, r, s) for p, r in zip(points, reps)]
@@ -105,7 +94,7 @@ def test_contactgen_solver_of_several_configurations_equals_each_alone(hand):
 def test_flex_of_several_configurations_equals_each_alone(hand):
     """Each configuration keeps its own starts (its generator), drops its own worse half and returns its
     own best S: a drop or a choice across configurations would change some configuration's grasps."""
-    prior = _prior(hand)
+    prior = pose_prior(hand)
     objects = _objects()
     scenes = [_scene(p, shift) for (p, _), shift in zip(objects, (0.1, 0.2, 0.3))]
     s = FlexSettings(steps=14, batch=8, drop_at=(4, 9), search_every=3, hand_points=128)
@@ -199,7 +188,7 @@ def test_a_method_predicts_a_chunk_as_it_predicts_each_configuration(hand, kind)
         settings = {"samples": 3, "contactgen": {"global_steps": 4, "pose_steps": 8, "max_contact_points": 16}}
     else:
         cfg = {"prior": "prior"}
-        models = {"prior": _prior(hand)}
+        models = {"prior": pose_prior(hand)}
         settings = {"samples": 2, "flex": {"steps": 8, "batch": 8, "drop_at": [3, 6], "hand_points": 64}}
     method = _method(kind, cfg, models, {**settings, "chunk": 3}, hand)
     together = method.predict_many(_requests(settings["samples"]))
@@ -212,7 +201,7 @@ def test_f_grasptta_filters_a_chunk_as_it_filters_each_configuration(hand):
     """The filter's ICP estimates and its kept flags, a chunk at once against one configuration at a time
     (each configuration's scene views split by the seed from its own stream)."""
     shard = _Shard()
-    grasps = np.stack([_near_object(hand, p, 4, 20 + c).numpy() for c, (p, _) in enumerate(_objects())])
+    grasps = np.stack([near_object(hand, p, 4, 20 + c).numpy() for c, (p, _) in enumerate(_objects())])
     arrays = {"object_id": shard.object_id.astype(np.int32), "config_index": shard.config_index.astype(np.int32),
               "grasp_init": grasps.astype(np.float32), "kept": np.ones((3, 4), bool),
               "contact": np.zeros((3, 4, N), np.float32)}

@@ -70,8 +70,7 @@ def test_directions_go_back_to_the_world_and_the_contact_is_the_shards_map(hand)
 # ---------------------------------------------------------------------------------------------------------
 # The sequential CVAE (ContactGen) and its contact-only reduction (ContactCVAE) learn their targets.
 
-from tests.test_grasptta import _prepared, _train  # noqa: E402
-from tests.test_maps import built  # noqa: E402, F401  (the module-scoped fixture)
+from helpers import prepared_component, train_steps  # noqa: E402
 from tohgs.data.batch import Batch  # noqa: E402
 
 CONTACT_GEN = {"latent": 8, "hidden": [32, 32], "kl_anneal_steps": 50,
@@ -82,9 +81,9 @@ CONTACT_GEN = {"latent": 8, "hidden": [32, 32], "kl_anneal_steps": 50,
 def test_a_trained_contact_gen_reconstructs_its_targets_better_than_an_untrained_one(built, parts):  # noqa: F811
     tmp, hand, _, _, _ = built
     net = {**CONTACT_GEN, "parts": parts}
-    fresh, data = _prepared("contact_gen", net, tmp / "shard-0.zarr", hand)
-    trained, _ = _prepared("contact_gen", net, tmp / "shard-0.zarr", hand)
-    _train(trained, data, 80)
+    fresh, data = prepared_component("contact_gen", net, tmp / "shard-0.zarr", hand)
+    trained, _ = prepared_component("contact_gen", net, tmp / "shard-0.zarr", hand)
+    train_steps(trained, data, 80)
     batch = Batch.collate([data.item(i, 0) for i in range(len(data))])
     truth = trained.targets(batch) if parts else None
     w = 1.0 + 5.0 * batch.contact

@@ -10,14 +10,12 @@ import pytest
 import torch
 from torch import nn
 
+from helpers import SMALL_PN
 from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
 from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, sample, timestep_embedding
 from tohgs.models.grasp_diffuser import GraspCondition, GraspDiffuser, GraspDiffuserConfig, grasp_losses, vertex_normals
 from tohgs.data.batch import Batch
 from tohgs.models.train import EMA, cosine_with_warmup
-
-SMALL_PN = {"sa": [[32, 0.05, 8, [16, 32]], [8, 0.1, 8, [32, 32]], [0, 0.0, 0, [32, 48]]], "fp": [[32], [32], [32]]}
-
 
 def _diffusers_scheduler(cfg: DiffusionConfig, sampler: str):
     """diffusers' scheduler for ``cfg``: the reference our schedule is checked against (a test dependency)."""

@@ -7,7 +7,6 @@ import pandas as pd
 import pytest
 import trimesh
 
-from tests.test_maps import built  # noqa: F401  (the module-scoped tiny dataset)
 from tohgs.assets.manifest import record_object_files
 from tohgs.geometry.scene import SceneCollider
 from tohgs.metrics.evaluate import COLUMNS, _ObjectAssets, diversity, grasp_metrics, occupied_fraction

@@ -7,10 +7,10 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
+from helpers import placing_scene
 from tohgs.assets.bricks import make_brick
 from tohgs.assets.manifest import record_object_files
 from tohgs.assets.supports import make_table
-from tohgs.data.scenes import SceneSet
 from tohgs.geometry.grasp import pose_matrix, transform_grasp
 from tohgs.grasps.expand import ExpansionSettings, expand_configurations
 from tohgs.hand import load_hand
@@ -35,21 +35,6 @@ def test_transform_grasp_moves_the_hand_mesh_rigidly(hand):
     np.testing.assert_array_equal(moved[:, 6:], grasp[:, 6:])
 
 
-def _scene(obstacle_xy: tuple[float, float] | None) -> SceneSet:
-    """One Placing configuration: the cube brick at (0, 0) picked and put at (0.3, 0); optionally one
-    obstacle (a cube brick) near the initial pose."""
-    up = [0.0, 0.0, 0.0, 1.0]
-    init = np.array([[0.0, 0.0, 0.03, *up]])
-    goal = np.array([[0.3, 0.0, 0.03, *up]])
-    n_obs = 0 if obstacle_xy is None else 1
-    obs = np.array([[*obstacle_xy, 0.03, *up]]) if n_obs else np.zeros((0, 7))
-    return SceneSet(task="placing", object="brick-cube", target_init_pose=init, target_goal_pose=goal,
-                    support_id=np.zeros(1, np.int32), support_pose=np.array([[0.0, 0.0, 0.0, *up]]),
-                    base_id=np.full(1, -1, np.int32), base_pose=np.full((1, 7), np.nan),
-                    obstacle_offsets=np.array([0, n_obs], np.int64), obstacle_id=np.zeros(n_obs, np.int32),
-                    obstacle_pose=obs, objects=["brick-cube"], supports=["table"])
-
-
 def test_expansion_keeps_a_clear_grasp_and_drops_one_in_an_obstacle_or_the_table(hand, tmp_path):
     cube = make_brick("cube")
     cube.apply_translation(-cube.center_mass)
@@ -65,7 +50,7 @@ def test_expansion_keeps_a_clear_grasp_and_drops_one_in_an_obstacle_or_the_table
     top = cube.vertices[:, 2].max()
     grasp[0, 2] += top + 0.01 - low[0]
     grasp[1, 2] += top - 0.08 - low[1]
-    out = expand_configurations(_scene(None), grasp, hand.assets, tmp_path, supports, ExpansionSettings(0.002))
+    out = expand_configurations(placing_scene(None), grasp, hand.assets, tmp_path, supports, ExpansionSettings(0.002))
     assert out["prior_index"].tolist() == [0] and out["kept_per_config"].tolist() == [1]
     # the scene's difficulty: the low hand is in the table at both poses
     assert out["rejected_init"].tolist() == [1] and out["rejected_goal"].tolist() == [1]
@@ -75,7 +60,7 @@ def test_expansion_keeps_a_clear_grasp_and_drops_one_in_an_obstacle_or_the_table
         v = hand(torch.as_tensor(grasp[:1], dtype=torch.float32)).vertices.numpy()[0]
     xy = v[:, :2].mean(0) + np.array([0.0, 0.0])
     centre = np.array([*xy, 0.03 + top + 0.01 + 0.03])
-    blocked = _scene(None)
+    blocked = placing_scene(None)
     blocked.obstacle_offsets = np.array([0, 1], np.int64)
     blocked.obstacle_id = np.zeros(1, np.int32)
     blocked.obstacle_pose = np.array([[*centre, 0, 0, 0, 1.0]])
@@ -84,9 +69,9 @@ def test_expansion_keeps_a_clear_grasp_and_drops_one_in_an_obstacle_or_the_table
     # the obstacle stands where the cube was picked up, not where it goes: both hands rejected there only
     assert out["rejected_init"].tolist() == [2] and out["rejected_goal"].tolist() == [1]
     # World-frame grasps of the kept hand: at the goal, the hand moved with the cube by 0.3 m in x.
-    out = expand_configurations(_scene(None), grasp, hand.assets, tmp_path, supports, ExpansionSettings(0.002))
+    out = expand_configurations(placing_scene(None), grasp, hand.assets, tmp_path, supports, ExpansionSettings(0.002))
     np.testing.assert_allclose(out["grasp_goal"][0, :3] - out["grasp_init"][0, :3], [0.3, 0, 0], atol=1e-6)
     # No accepted prior grasp: no task grasp, every configuration counted.
-    none = expand_configurations(_scene(None), grasp[:0], hand.assets, tmp_path, supports, ExpansionSettings(0.002))
+    none = expand_configurations(placing_scene(None), grasp[:0], hand.assets, tmp_path, supports, ExpansionSettings(0.002))
     assert none["grasp_init"].shape == (0, 51) and none["kept_per_config"].tolist() == [0]
     assert none["rejected_init"].tolist() == [0] and none["rejected_goal"].tolist() == [0]

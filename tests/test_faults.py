@@ -19,8 +19,7 @@ import pytest
 import torch
 import yaml
 
-from tests.test_maps import built  # noqa: F401  (the module-scoped tiny dataset)
-from tests.test_train import SETTINGS, TINY
+from helpers import SETTINGS, TINY
 from tohgs.assets.objects import check_split_sizes, prepare_object, write_catalog
 from tohgs.assets.sources import ObjectSpec, dir_candidates, pybullet_data_root
 from tohgs.config import ConfigError, validate_config

@@ -8,12 +8,10 @@ import pytest
 import torch
 import trimesh
 
-from tests.test_grasptta import _prepared, _train
-from tests.test_maps import built  # noqa: F401  (the module-scoped fixture)
+from helpers import pose_prior, prepared_component, train_steps
 from tohgs.geometry.maps import sample_surface
 from tohgs.grasps.flex import FlexProblem, FlexSettings, contact_groups, optimise, start_grasps
 from tohgs.hand import load_hand
-from tohgs.models.pose_prior import PosePrior, PosePriorConfig
 
 
 @pytest.fixture(scope="module")
@@ -40,13 +38,6 @@ def _scene() -> tuple[torch.Tensor, ...]:
     return _t(p), _t(n), _t(sp), _t(sn), goal
 
 
-def _prior(hand) -> PosePrior:
-    prior = PosePrior(PosePriorConfig()).eval()
-    prior.mean.copy_(_t(hand.assets.prior_mean))
-    prior.std.fill_(0.1)
-    return prior
-
-
 def test_flex_takes_hands_that_start_inside_an_obstacle_out_of_the_scene_at_both_poses(hand):
     points, normals, scene, scene_normals, goal = _scene()
     settings = FlexSettings(steps=120, drop_at=(), search_every=5, init_distance=(0.02, 0.03))
@@ -57,7 +48,7 @@ def test_flex_takes_hands_that_start_inside_an_obstacle_out_of_the_scene_at_both
     side = palm[:, 0] / palm.norm(dim=-1) > 0.85
     start = cands[side][:8]
     problem = FlexProblem(hand, points, normals, scene, scene_normals, goal, settings)
-    prior = _prior(hand)
+    prior = pose_prior(hand)
     with torch.no_grad():
         start[:, 6:] = prior.decode(torch.zeros(len(start), prior.cfg.latent))
     init0, goal0 = problem.opp(start)
@@ -81,11 +72,11 @@ def test_drops_keep_the_best_candidates_and_too_few_survivors_are_refused(hand):
     points, normals, scene, scene_normals, goal = _scene()
     settings = FlexSettings(steps=30, batch=16, drop_at=(10, 20))
     assert settings.survivors() == 4
-    grasp, history = optimise(hand, _prior(hand), points, normals, scene, scene_normals, goal, 4, settings,
+    grasp, history = optimise(hand, pose_prior(hand), points, normals, scene, scene_normals, goal, 4, settings,
                               torch.Generator().manual_seed(1))
     assert grasp.shape == (4, 51) and torch.isfinite(grasp).all() and len(history["energy"]) == 31
     with pytest.raises(ValueError, match="raise flex.batch"):
-        optimise(hand, _prior(hand), points, normals, scene, scene_normals, goal, 5, settings, torch.Generator())
+        optimise(hand, pose_prior(hand), points, normals, scene, scene_normals, goal, 5, settings, torch.Generator())
     with pytest.raises(ValueError, match="drop_at"):
         FlexSettings(drop_at=(100, 50))
     groups = contact_groups(hand)
@@ -95,9 +86,9 @@ def test_drops_keep_the_best_candidates_and_too_few_survivors_are_refused(hand):
 def test_a_trained_pose_prior_reconstructs_the_training_poses_better_than_an_untrained_one(built):  # noqa: F811
     tmp, hand, _, _, _ = built
     net = {"latent": 8, "hidden": [64, 64]}
-    fresh, data = _prepared("pose_prior", net, tmp / "shard-0.zarr", hand)
-    trained, _ = _prepared("pose_prior", net, tmp / "shard-0.zarr", hand)
-    _train(trained, data, 200)
+    fresh, data = prepared_component("pose_prior", net, tmp / "shard-0.zarr", hand)
+    trained, _ = prepared_component("pose_prior", net, tmp / "shard-0.zarr", hand)
+    train_steps(trained, data, 200)
     fingers = torch.as_tensor(np.concatenate([np.asarray(s.grasp) for s in data.shards]))[:, 6:]
 
     def error(model):

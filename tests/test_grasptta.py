@@ -9,9 +9,8 @@ import torch
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from tests.test_maps import built  # noqa: F401  (the module-scoped fixture)
+from helpers import prepared_component, train_steps
 from tohgs.data.batch import Batch
-from tohgs.data.maps import MapDataset
 from tohgs.geometry.cloud import cloud_signed_distance, penetration_fraction
 from tohgs.geometry.maps import sample_surface, scene_cloud
 from tohgs.geometry.registration import ICPSettings, register, transform_error
@@ -116,27 +115,6 @@ def test_the_adaptation_lowers_its_energy_and_keeps_the_joints_in_their_limits(h
         TTASettings(search_every=0)
 
 
-def _prepared(kind, network, shard_path, hand):
-    torch.manual_seed(0)
-    model = build_component(kind, network)
-    data = MapDataset([shard_path], per="grasp", rotation="z", seed=0)
-    model.prepare(data, "placing", hand)
-    return model, data
-
-
-def _train(model, data, steps, batch=8, lr=2e-3):
-    opt = torch.optim.Adam(model.parameters(), lr=lr)
-    gen = torch.Generator().manual_seed(0)
-    rng = np.random.default_rng(0)
-    for step in range(steps):
-        items = [data.item(int(i), step) for i in rng.integers(0, len(data), batch)]
-        loss = model.loss(Batch.collate(items), gen)["loss"]
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-    return model.eval()
-
-
 CVAE = {"object_mlp": [32, 64], "hand_mlp": [32, 64], "encoder": [64], "decoder": [64], "latent": 8}
 
 
@@ -144,9 +122,9 @@ CVAE = {"object_mlp": [32, 64], "hand_mlp": [32, 64], "encoder": [64], "decoder"
 def test_a_trained_grasp_cvae_reconstructs_its_training_grasps_better_than_an_untrained_one(built, contact_channel):  # noqa: F811
     tmp, hand, _, _, _ = built
     net = {**CVAE, "contact_channel": contact_channel}
-    fresh, data = _prepared("grasp_cvae", net, tmp / "shard-0.zarr", hand)
-    trained, _ = _prepared("grasp_cvae", net, tmp / "shard-0.zarr", hand)
-    _train(trained, data, 150)
+    fresh, data = prepared_component("grasp_cvae", net, tmp / "shard-0.zarr", hand)
+    trained, _ = prepared_component("grasp_cvae", net, tmp / "shard-0.zarr", hand)
+    train_steps(trained, data, 150)
     batch = Batch.collate([data.item(i, 0) for i in range(len(data))])
 
     def vertex_error(model):
@@ -167,9 +145,9 @@ def test_a_trained_contact_net_predicts_the_true_map_of_a_perturbed_hand_better_
 
     tmp, hand, _, _, _ = built
     net = {"object_mlp": [32], "hand_mlp": [32], "head": [32]}
-    fresh, data = _prepared("contact_net", net, tmp / "shard-0.zarr", hand)
-    trained, _ = _prepared("contact_net", net, tmp / "shard-0.zarr", hand)
-    _train(trained, data, 150)
+    fresh, data = prepared_component("contact_net", net, tmp / "shard-0.zarr", hand)
+    trained, _ = prepared_component("contact_net", net, tmp / "shard-0.zarr", hand)
+    train_steps(trained, data, 150)
     batch = Batch.collate([data.item(i, 1) for i in range(len(data))])
     with torch.no_grad():
         verts = hand(perturb_grasps(batch.grasp, trained.cfg.noise, torch.Generator().manual_seed(5))).vertices

@@ -131,7 +131,7 @@ def _batch(b: int, g: torch.Generator) -> Batch:
 
 
 def test_zero_weights_give_exactly_the_unguided_samples_and_weights_change_them():
-    from tests.test_diffusion import SMALL_PN
+    from helpers import SMALL_PN
     from tohgs.models.grasp_diffuser import GraspDiffuser, GraspDiffuserConfig
 
     hand32 = load_hand("anny")
@@ -244,7 +244,7 @@ def test_contact_guidance_moves_contact_off_the_points_near_the_scene_and_leaves
 
 
 def test_the_contact_diffuser_samples_guided_only_when_asked():
-    from tests.test_diffusion import SMALL_PN
+    from helpers import SMALL_PN
     from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
 
     torch.manual_seed(0)
@@ -311,7 +311,7 @@ def test_select_diverse_equals_a_plain_greedy_pick_and_spreads_more_than_the_low
 def test_contact_grasp_samples_candidates_and_keeps_s_of_lower_energy(hand):
     from types import SimpleNamespace
 
-    from tests.test_diffusion import SMALL_PN
+    from helpers import SMALL_PN
     from tohgs.methods.base import PredictSettings
     from tohgs.methods.contact_grasp import ContactGrasp
     from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig

@@ -8,27 +8,18 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from tohgs.assets.objects import assign_splits, prepare_object, read_catalog, write_catalog
+from helpers import OBJECTS_CFG, prepare_small_object
+from tohgs.assets.objects import assign_splits, read_catalog, write_catalog
 from tohgs.assets.sources import ObjectSpec, TASK_SET_OBJECTS
-from tohgs.config import validate_config
-
-CFG = validate_config({})["objects"]
-FAST = {**CFG["decomposition"], "threshold": 0.2, "max_convex_hull": 6, "preprocess_resolution": 20,
-        "resolution": 500, "mcts_iterations": 20, "mcts_nodes": 5}
-
-
-def _prepare(spec, out, cache):
-    return prepare_object(spec, out, CFG["size"], 1.0, FAST, CFG["density"], 0, cache)
-
 
 def test_brick_object_folder_and_urdf(tmp_path):
     spec = ObjectSpec("brick-u-shape", "bricks", "stacking", None, "u-shape")
-    meta = _prepare(spec, tmp_path / "brick-u-shape", tmp_path / "cache")
+    meta = prepare_small_object(spec, tmp_path / "brick-u-shape", tmp_path / "cache")
     d = tmp_path / "brick-u-shape"
     assert meta["status"] == "ok"
     assert sorted(f.name for f in d.iterdir()) == ["collision.obj", "mesh.obj", "meta.json", "object.urdf"]
     assert json.loads((d / "meta.json").read_text())["n_collision_parts"] == meta["n_collision_parts"] >= 2
-    assert meta["mass"] == pytest.approx(meta["volume"] * CFG["density"])
+    assert meta["mass"] == pytest.approx(meta["volume"] * OBJECTS_CFG["density"])
     cid = p.connect(p.DIRECT)
     try:
         body = p.loadURDF(str(d / "object.urdf"), physicsClientId=cid)
@@ -47,11 +38,11 @@ def test_mesh_object_is_rescaled_into_the_graspable_range(tmp_path):
     from tohgs.assets.sources import pybullet_named_candidates
 
     duck = next(c for c in pybullet_named_candidates() if c.name == "pb-duck")
-    meta = _prepare(duck, tmp_path / duck.name, None)
+    meta = prepare_small_object(duck, tmp_path / duck.name, None)
     ext = np.sort(meta["extents"])
-    assert CFG["size"]["longest_min"] - 1e-9 <= ext[2] <= CFG["size"]["longest_max"] + 1e-9
-    assert CFG["size"]["thickness_min"] - 1e-9 <= ext[0] <= CFG["size"]["thickness_max"] + 1e-9
-    again = _prepare(duck, tmp_path / "again", None)
+    assert OBJECTS_CFG["size"]["longest_min"] - 1e-9 <= ext[2] <= OBJECTS_CFG["size"]["longest_max"] + 1e-9
+    assert OBJECTS_CFG["size"]["thickness_min"] - 1e-9 <= ext[0] <= OBJECTS_CFG["size"]["thickness_max"] + 1e-9
+    again = prepare_small_object(duck, tmp_path / "again", None)
     assert again["scale"] == meta["scale"], "the scale draw is not deterministic"
 
 
@@ -59,7 +50,7 @@ def test_broken_file_is_recorded_as_rejected(tmp_path):
     bad = tmp_path / "broken.obj"
     bad.write_text("v nan nan nan\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     spec = ObjectSpec("dir-broken", "dir", TASK_SET_OBJECTS, str(bad))
-    meta = _prepare(spec, tmp_path / "dir-broken", None)
+    meta = prepare_small_object(spec, tmp_path / "dir-broken", None)
     assert meta["status"] == "rejected" and "non-finite" in meta["reason"]
     assert [f.name for f in (tmp_path / "dir-broken").iterdir()] == ["meta.json"]
 
@@ -79,7 +70,7 @@ def test_catalog_from_folders(tmp_path):
              ObjectSpec("dir-missing", "dir", TASK_SET_OBJECTS, str(tmp_path / "missing.obj"))]
     dirs = []
     for s in specs:
-        _prepare(s, tmp_path / "objects" / s.name, None)
+        prepare_small_object(s, tmp_path / "objects" / s.name, None)
         dirs.append(tmp_path / "objects" / s.name)
     split = {"objects": {"test": 0.2, "val": 0.0}, "bricks": {"test": 0.5, "val": 0.0}}
     write_catalog(dirs, split, 0, tmp_path / "objects" / "catalog.csv")
@@ -100,12 +91,12 @@ def test_a_ycb_object_goes_through_the_objects_stage(tmp_path):
 
     spec = ycb_candidates(["007_tuna_fish_can"])[0]
     assert spec.name == "ycb-007-tuna-fish-can"
-    meta = _prepare(spec, tmp_path / spec.name, None)
+    meta = prepare_small_object(spec, tmp_path / spec.name, None)
     assert meta["status"] == "ok", meta["reason"]
     assert any(r.startswith("dropped 2 stray open fragments") for r in meta["repairs"])
     ext = np.sort(meta["extents"])
-    assert CFG["size"]["longest_min"] - 1e-9 <= ext[2] <= CFG["size"]["longest_max"] + 1e-9
-    assert CFG["size"]["thickness_min"] - 1e-9 <= ext[0] <= CFG["size"]["thickness_max"] + 1e-9
+    assert OBJECTS_CFG["size"]["longest_min"] - 1e-9 <= ext[2] <= OBJECTS_CFG["size"]["longest_max"] + 1e-9
+    assert OBJECTS_CFG["size"]["thickness_min"] - 1e-9 <= ext[0] <= OBJECTS_CFG["size"]["thickness_max"] + 1e-9
     assert meta["n_collision_parts"] >= 1 and meta["watertight"]
     cid = p.connect(p.DIRECT)
     try:

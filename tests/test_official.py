@@ -1,5 +1,5 @@
 """The official TOHGS dataset: import a small synthetic tree in the official format, export predictions in the
-official evaluation's format, and compare (tohgs/data/official.py, docs/official_dataset.md)."""
+official evaluation's format, and compare (tohgs/official/, docs/official_dataset.md)."""
 
 from __future__ import annotations
 
@@ -14,8 +14,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tohgs.data.official import (NO_PRIOR, export_official, import_official, load_official_npy, read_import,
-                                 safe_loads, shift_grasp, to_official_pose)
+from tohgs.official.exporter import export_official
+from tohgs.official.format import NO_PRIOR, load_official_npy, load_official_pickle, shift_grasp, to_official_pose
+from tohgs.official.importer import import_official, read_import
 from tohgs.data.predictions import write_predictions
 from tohgs.data.scenes import read_scenes
 from tohgs.data.task_grasps import read_task_grasps
@@ -76,7 +77,7 @@ def test_the_workflow_reads_the_splits_and_the_hand(imported):
     (copy / "objects/catalog.csv").write_text((imported["out"] / "objects/catalog.csv").read_text())
     with pytest.raises(ValueError, match="import again"):
         read_import(copy)
-    with pytest.raises(FileNotFoundError, match="python -m tohgs.data.official import"):
+    with pytest.raises(FileNotFoundError, match="python -m tohgs.official import"):
         read_import(copy / "nothing")
     older = imported["out"].parent / "older-import"  # objects without the checksums of their files
     shutil.copytree(imported["out"], older)
@@ -207,13 +208,13 @@ class _Evil:
 def test_restricted_loader_refuses_code():
     evil = pickle.dumps(_Evil())  # pickling only names os.system; nothing runs
     with pytest.raises(ValueError, match=r"refusing global '(os|posix)\.system'"):
-        safe_loads(evil, "evil.pkl")
+        load_official_pickle(evil, "evil.pkl")
     header = io.BytesIO()
     np.lib.format.write_array_header_1_0(header, {"descr": "|O", "fortran_order": False, "shape": ()})
     with pytest.raises(ValueError, match=r"evil\.npy: refusing global"):
         load_official_npy(header.getvalue() + evil, "evil.npy")  # the header writes the magic
     with pytest.raises(ValueError, match="refusing global 'collections.OrderedDict'"):
-        safe_loads(pickle.dumps(__import__("collections").OrderedDict(a=1)), "x")
+        load_official_pickle(pickle.dumps(__import__("collections").OrderedDict(a=1)), "x")
     ok = io.BytesIO()
     np.save(ok, {"a": [np.arange(3.0)], "b": "name"}, allow_pickle=True)
     d = load_official_npy(ok.getvalue())
@@ -318,10 +319,27 @@ def test_names_that_sanitise_alike_are_a_problem_naming_both_files(tree, hand, t
     assert mug.attrs["official"]["names"]["off-box-c"] == "Box_C"
 
 
+def test_the_command_line_writes_what_the_library_writes(tree, hand, tmp_path, capsys):
+    """``python -m tohgs.official import`` (its main, in this process) writes the files import_official writes,
+    byte for byte, prints the counts and exits 1 when a file could not be used."""
+    from tohgs.official.__main__ import main
+
+    rc = main(["import", str(tree["root"]), str(tmp_path / "cli"), "--tasks", "placing", "--hand", "anny"])
+    report = import_official(tree["root"], tmp_path / "lib", hand, ["placing"])
+
+    def files(d: Path) -> dict[Path, bytes]:  # the report names its own output folder
+        return {p.relative_to(d): p.read_bytes() for p in sorted(d.rglob("*")) if p.is_file()
+                and p.name != "import_report.json"}
+
+    assert files(tmp_path / "cli") == files(tmp_path / "lib") and len(files(tmp_path / "lib")) > 10
+    assert rc == 1 and report.n_problems == 1  # the unreadable broken.npy
+    assert f"{report.files_read} files read, 1 problems" in capsys.readouterr().out
+
+
 def test_a_failed_reimport_leaves_the_earlier_import_whole(tree, hand, tmp_path, monkeypatch):
     """A re-import that fails half-way once left new objects next to old scenes and grasps; now an import is
     written into a temporary folder and renamed into place only when complete."""
-    import tohgs.data.official as official
+    import tohgs.official.importer as official
 
     out = tmp_path / "out"
     import_official(tree["root"], out, hand, ["placing"])

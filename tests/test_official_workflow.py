@@ -48,7 +48,7 @@ def _snakemake(work: Path, *args: str, timeout: int = 1800) -> subprocess.Comple
 
 @pytest.fixture(scope="module")
 def official_run(tmp_path_factory) -> SimpleNamespace:
-    from tohgs.data.official import import_official
+    from tohgs.official.importer import import_official
     from tohgs.hand import load_hand_assets
 
     work = copy_workflow(tmp_path_factory.mktemp("official-run"))
@@ -110,7 +110,8 @@ def test_table1_has_ours_and_says_why_the_dataset_row_is_empty(official_run):
 def test_predictions_export_to_the_official_test_configurations(official_run):
     """Ours' predictions, exported, name the test JSON's configurations: each grasp's target pose and
     obstacles are the JSON entry's (exactly, after the frame round trip), and the hand is at the object."""
-    from tohgs.data.official import export_official, load_official_npy
+    from tohgs.official.exporter import export_official
+    from tohgs.official.format import load_official_npy
     from tohgs.hand import HandAssets
 
     work = official_run.work

@@ -9,7 +9,7 @@ import pytest
 import torch
 import trimesh
 
-from tests.test_batched import _near_object
+from helpers import near_object
 from tohgs.geometry.cloud import CloudIndex
 from tohgs.geometry.hand_object import contact_values, inside_hand, nearest_index, nearest_vertex, vertex_normals
 from tohgs.geometry.maps import sample_surface
@@ -28,7 +28,7 @@ def problem(hand):
     """Six hands near a 512-point capsule (random turns, the palm on the surface, some inside it)."""
     p, n = sample_surface(trimesh.creation.capsule(height=0.08, radius=0.03), 512, np.random.default_rng(0))
     points = torch.as_tensor(p - p.mean(0), dtype=torch.float32)
-    return _near_object(hand, points, 6, 0), points[None].expand(6, -1, -1)
+    return near_object(hand, points, 6, 0), points[None].expand(6, -1, -1)
 
 
 def reference_vertex_normals(verts: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:

@@ -8,8 +8,7 @@ import dataclasses
 import pytest
 import torch
 
-from tests.test_grasptta import _prepared, _train
-from tests.test_maps import built  # noqa: F401  (the module-scoped fixture)
+from helpers import prepared_component, train_steps
 from tohgs.data.batch import Batch
 from tohgs.models.grasp_diffuser import GraspDiffuserConfig
 
@@ -28,9 +27,9 @@ def _vertex_error(hand, grasps: torch.Tensor, truth: torch.Tensor) -> float:
 def test_a_trained_scene_diffuser_samples_its_training_grasps_without_a_map(built):  # noqa: F811
     """On one object (a cube: which object it is, is the workflow test's check, on the smoke models)."""
     tmp, hand, _, _, _ = built
-    fresh, data = _prepared("grasp_diffuser", SCENE_DIFFUSER, tmp / "shard-0.zarr", hand)
-    trained, _ = _prepared("grasp_diffuser", SCENE_DIFFUSER, tmp / "shard-0.zarr", hand)
-    _train(trained, data, 150, batch=16)
+    fresh, data = prepared_component("grasp_diffuser", SCENE_DIFFUSER, tmp / "shard-0.zarr", hand)
+    trained, _ = prepared_component("grasp_diffuser", SCENE_DIFFUSER, tmp / "shard-0.zarr", hand)
+    train_steps(trained, data, 150, batch=16)
     # Sampling needs no contact map; the samples land near the training grasps of that object, an
     # untrained copy's do not.
     items = [data.item(i, 0) for i in range(len(data))]
@@ -46,7 +45,7 @@ def test_a_trained_scene_diffuser_samples_its_training_grasps_without_a_map(buil
 
 def test_a_grasp_diffuser_that_reads_maps_refuses_a_batch_without_one_and_bad_settings_are_refused(built):  # noqa: F811
     tmp, hand, _, _, _ = built
-    model, data = _prepared("grasp_diffuser", {"d_model": 32, "n_blocks": 1, "mlp": [32]}, tmp / "shard-0.zarr", hand)
+    model, data = prepared_component("grasp_diffuser", {"d_model": 32, "n_blocks": 1, "mlp": [32]}, tmp / "shard-0.zarr", hand)
     batch = dataclasses.replace(Batch.collate([data.item(0, 0)]), contact=None)
     with pytest.raises(ValueError, match="contact maps"):
         model.eval().sample_grasps(batch, "ddim", 2, torch.Generator().manual_seed(0))

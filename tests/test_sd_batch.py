@@ -10,17 +10,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from tohgs.assets.objects import prepare_object
+from helpers import prepare_small_object
 from tohgs.assets.sources import ObjectSpec
-from tohgs.config import validate_config
 from tohgs.hand import load_hand_assets
 from tohgs.metrics.quality import (DisplacementSimulator, RobustSDSettings, SDSettings, SDWorkers, contact_distance,
                                    hand_quality, perturbed_starts, sd_gravity, surface_voxels)
 from tohgs.sim.isolation import SimulationCrash
 
-CFG = validate_config({})["objects"]
-FAST = {**CFG["decomposition"], "threshold": 0.2, "max_convex_hull": 6, "preprocess_resolution": 20,
-        "resolution": 500, "mcts_iterations": 20, "mcts_nodes": 5}
 POSE = np.array([0.3, -0.2, 0.75, 0.0, 0.0, np.sin(0.3), np.cos(0.3)])  # the object's world pose
 PAPER_GRAVITY = (0.0, 9.8, 0.0)  # the official code's fixed world-frame gravity
 
@@ -31,8 +27,7 @@ def u_brick(tmp_path_factory):
     import trimesh
 
     out = tmp_path_factory.mktemp("objects") / "brick-u-shape"
-    meta = prepare_object(ObjectSpec("brick-u-shape", "bricks", "stacking", None, "u-shape"), out, CFG["size"], 1.0,
-                          FAST, CFG["density"], 0, None)
+    meta = prepare_small_object(ObjectSpec("brick-u-shape", "bricks", "stacking", None, "u-shape"), out, None)
     assert meta["n_collision_parts"] >= 2  # a multi-part compound, the case the default objects are
     mesh = trimesh.load(out / "mesh.obj", force="mesh", process=False)
     return out / "collision.obj", mesh, np.asarray(mesh.vertices).mean(0)

@@ -6,21 +6,14 @@ import numpy as np
 import pytest
 import torch
 
-from tests.test_diffusion import SMALL_PN
-from tests.test_maps import built  # noqa: F401  (the module-scoped fixture)
+from helpers import OURS, SETTINGS, TINY
 from tohgs.data.predictions import read_predictions
 from tohgs.geometry.grasp import transform_grasp
 from tohgs.methods.predict import predict
 from tohgs.models.checkpoint import load_component
 from tohgs.models.train import train_component
 
-OURS = {"label": "Ours", "kind": "contact_grasp", "contact": "contact_diffuser", "grasp": "grasp_diffuser"}
 OURS_GT = {"label": "Ours (GT contact)", "kind": "contact_grasp", "contact": "ground_truth", "grasp": "grasp_diffuser"}
-
-TINY = {"contact_diffuser": {"d_model": 16, "n_blocks": 1, "pointnet": SMALL_PN},
-        "grasp_diffuser": {"d_model": 16, "n_blocks": 1, "pointnet": SMALL_PN}}
-SETTINGS = {"steps": 10, "batch": 3, "warmup": 2, "log_every": 2, "checkpoint_every": 5, "train_points": 128,
-            "device": "cpu"}
 
 
 @pytest.fixture(scope="module")

@@ -52,7 +52,8 @@ def object_rng(seed: int, name: str) -> np.random.Generator:
     return np.random.default_rng([seed, zlib.crc32(name.encode())])
 
 
-def _write_obj_parts(path: Path, parts: list[trimesh.Trimesh]) -> None:
+def write_obj_parts(path: Path, parts: list[trimesh.Trimesh]) -> None:
+    """Write convex parts as one OBJ file, one ``o part_<k>`` object each (the collision mesh's format)."""
     lines, offset = [], 1
     for k, p in enumerate(parts):
         lines.append(f"o part_{k}")
@@ -62,7 +63,9 @@ def _write_obj_parts(path: Path, parts: list[trimesh.Trimesh]) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
-def _urdf(name: str, mass: float, inertia: np.ndarray) -> str:
+def object_urdf(name: str, mass: float, inertia: np.ndarray) -> str:
+    """The URDF text of an object folder: one link of ``mass`` (kg) and ``inertia`` (3, 3) about the centre of
+    mass, visual ``mesh.obj``, collision ``collision.obj``."""
     i = inertia
     return f"""<?xml version="1.0"?>
 <robot name="{name}">
@@ -143,8 +146,8 @@ def prepare_object(spec: dict[str, Any] | ObjectSpec, out_dir: str | Path, size:
         parts, method = convex_decomposition(mesh, settings, cache_dir)
         mp = mass_properties(mesh, density)
         mesh.export(tmp / OBJECT_MESH)
-        _write_obj_parts(tmp / COLLISION_MESH, parts)
-        (tmp / OBJECT_URDF).write_text(_urdf(spec.name, mp.mass, mp.inertia))
+        write_obj_parts(tmp / COLLISION_MESH, parts)
+        (tmp / OBJECT_URDF).write_text(object_urdf(spec.name, mp.mass, mp.inertia))
         meta.update(
             scale=scale, extents=mesh.extents.tolist(), bounds=mesh.bounds.tolist(), volume=mp.volume,
             mass=mp.mass, density=density, inertia=mp.inertia.tolist(), watertight=bool(mesh.is_watertight),

@@ -2,9 +2,9 @@
 
 The MANO file is licence-restricted: tohgs never ships or downloads it. A user who has one points
 ``hand.mano_path`` at it. The file is a Python-2 pickle of numpy arrays, a scipy sparse matrix
-(``J_regressor``) and chumpy objects; it is read with a restricted unpickler that builds numpy arrays and
-scipy sparse matrices only, turns chumpy objects into plain arrays (their ``x`` value) and refuses every
-other global, so a malicious pickle cannot run code.
+(``J_regressor``) and chumpy objects; it is read with the restricted unpickler (:mod:`tohgs.safe_pickle`),
+which builds numpy arrays and scipy sparse matrices only, turns chumpy objects into plain arrays (their ``x``
+value) and refuses every other global, so a malicious pickle cannot run code.
 
 MANO's equations (Romero et al. 2017): ``T(beta, theta) = v_template + S beta + P (R(theta) - I)``,
 joints ``J = J_regressor T(beta)`` (linear in beta), then linear blend skinning; the template is the flat
@@ -13,7 +13,6 @@ hand (``flat_hand_mean=True``) in the canonical frame, so it is used as it is.
 
 from __future__ import annotations
 
-import io
 import pickle
 from pathlib import Path
 from typing import Any
@@ -21,18 +20,14 @@ from typing import Any
 import numpy as np
 
 from tohgs.hand.assets import HandAssets
+from tohgs.safe_pickle import NUMPY_GLOBALS, restricted_loads
 
-#: Globals the MANO pickle may name, and what they become.
-_NUMPY_GLOBALS = {
-    ("numpy.core.multiarray", "_reconstruct"), ("numpy._core.multiarray", "_reconstruct"),
-    ("numpy", "ndarray"), ("numpy", "dtype"), ("numpy.core.multiarray", "scalar"),
-    ("numpy._core.multiarray", "scalar"),
-}
+#: Globals a MANO pickle may name (:func:`tohgs.safe_pickle.restricted_loads`' allow-list): numpy's, and
+#: Python 2's ``copyreg._reconstructor(cls, object, state)``, safe here because every class it can receive
+#: comes from this list or the stand-ins; protocol-2 pickles written by Python 3 carry bytes as
+#: ``_codecs.encode(str, 'latin1')``, a pure function.
+MANO_GLOBALS = NUMPY_GLOBALS | {("copyreg", "_reconstructor"), ("builtins", "object"), ("_codecs", "encode")}
 _SPARSE_CLASSES = {"csc_matrix", "csr_matrix", "coo_matrix"}
-
-
-class UnsafePickleError(pickle.UnpicklingError):
-    """The pickle names a global that is neither numpy, scipy.sparse nor chumpy."""
 
 
 class _ChumpyStub:
@@ -79,22 +74,13 @@ class _SparseStub:
 _SPARSE_STUBS = {k: type(f"_{k}_stub", (_SparseStub,), {"kind": k}) for k in _SPARSE_CLASSES}
 
 
-class _RestrictedUnpickler(pickle.Unpickler):
-    def find_class(self, module: str, name: str) -> Any:
-        import importlib
-
-        if (module, name) in _NUMPY_GLOBALS:
-            return getattr(importlib.import_module(module), name)
-        if (module, name) in (("copyreg", "_reconstructor"), ("builtins", "object"), ("_codecs", "encode")):
-            # Python 2 pickles build objects with copyreg._reconstructor(cls, object, state), safe here
-            # because every class it can receive comes from this method; protocol-2 pickles written by
-            # Python 3 carry bytes as _codecs.encode(str, 'latin1'), a pure function.
-            return getattr(importlib.import_module(module), name)
-        if module.startswith("scipy.sparse") and name in _SPARSE_CLASSES:
-            return _SPARSE_STUBS[name]
-        if module == "chumpy" or module.startswith("chumpy."):
-            return _ChumpyStub
-        raise UnsafePickleError(f"refusing global '{module}.{name}' (only numpy, scipy.sparse and chumpy are allowed)")
+def _stand_in(module: str, name: str) -> type | None:
+    """The inert class built in place of a scipy sparse matrix or any chumpy object (None: refused)."""
+    if module.startswith("scipy.sparse") and name in _SPARSE_CLASSES:
+        return _SPARSE_STUBS[name]
+    if module == "chumpy" or module.startswith("chumpy."):
+        return _ChumpyStub
+    return None
 
 
 def _plain(v: Any) -> Any:
@@ -115,13 +101,8 @@ def read_mano_pickle(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"hand.mano_path: '{path}' does not exist (supply your own MANO_RIGHT.pkl)")
-    data = path.read_bytes()
-    try:
-        obj = _RestrictedUnpickler(io.BytesIO(data), encoding="latin1").load()
-    except UnsafePickleError as exc:
-        raise ValueError(f"{path}: {exc}") from exc
-    except Exception as exc:
-        raise ValueError(f"{path}: not a readable MANO pickle ({type(exc).__name__}: {exc})") from exc
+    obj = restricted_loads(path.read_bytes(), str(path), MANO_GLOBALS, stand_ins=_stand_in,
+                           allowed_text="only numpy, scipy.sparse and chumpy are allowed", kind="MANO pickle")
     if not isinstance(obj, dict):
         raise ValueError(f"{path}: expected a dict at the top of the MANO pickle, got {type(obj).__name__}")
     return {k: _plain(v) for k, v in obj.items()}

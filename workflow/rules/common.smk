@@ -18,7 +18,7 @@ from tohgs.config import (ConfigError, add_seed_replicas, drop_ground_truth_rows
 from tohgs.assets.objects import check_split_sizes, read_catalog
 from tohgs.assets.sources import select_objects, task_set
 from tohgs.grasps.filter import SCREEN_KEYS
-from tohgs.data.official import read_import
+from tohgs.official.importer import read_import
 from tohgs.methods import method_components
 from tohgs.models import CHECKED_KINDS
 from tohgs.models.guidance_settings import GuidanceSettings
@@ -69,7 +69,7 @@ def imported(path):
     return os.path.join(OFFICIAL, path)
 
 
-OBJECT_NAME = "(pb|brick|dir|ycb|off)-[a-z0-9-]+"  # the {object} wildcard (tohgs.assets.sources, tohgs.data.official)
+OBJECT_NAME = "(pb|brick|dir|ycb|off)-[a-z0-9-]+"  # the {object} wildcard (tohgs.assets.sources, tohgs.official.format)
 
 
 def objects_dir_of_supports(wildcards, input):

@@ -1,23 +1,5 @@
-"""The official TOHGS dataset (Liu, Chao, Chen, ICCV 2025): an importer into tohgs's stores and an exporter of
-tohgs's predictions into the official evaluation's output format. ``docs/official_dataset.md`` is the guide.
-
-**What the importer reads** (below ``root``; paths relative to it):
-
-- ``models/meshdata/<obj>/coacd/decomposed_scaled.obj``: the Placing/Shelving objects and obstacles (their
-  CoACD convex parts, metres); ``models/brick/<A..X>/textured_simple.obj``: the Stacking bricks;
-  ``models/selected_shelf/<shelf>/coacd/decomposed.obj``: the shelves; ``models/table/table.obj``: the
-  table (their code scales it by 1.5 x 1.0 x 0.05 and puts it at z = 0.6).
-- ``task_oriented_grasps_dataset/<task>/``: ``train.txt`` and ``val.txt`` (one ``<obj>.npy`` per line;
-  Stacking's split is hard-coded in their code, :data:`STACKING_SPLIT`), ``<obj>.npy`` (a pickled dict of
-  equal-length lists, one row per grasp) and ``test/<obj>.json`` (the evaluation's configurations).
-
-Row keys: Placing ``init_pose``, ``goal_pose`` (7 numbers: xyz m + xyzw quaternion), ``recon_param``
-((1, 51) world-frame MANO: translation 3 m, global axis-angle 3, 15 x 3 finger axis-angles; the same order
-as tohgs's grasp vector, :mod:`tohgs.geometry.grasp`, so the numbers are taken as they are),
-``obstacle_pose`` (a list of 7-vectors per row), ``obstacle_name``; Shelving adds ``shelf_pose`` and
-``shelf_name``; Stacking has ``init`` and ``goal`` (each ``[base_name, base_pose7, grasped_name,
-grasped_pose7]``) and ``recon_parms`` (sic). Test JSON: the same scene keys per configuration, and
-``grasped_obj_name`` (one string for Placing, a list per configuration for Shelving).
+"""The importer of the official TOHGS dataset: the official tree (:mod:`tohgs.official.format`) into
+tohgs's stores.
 
 **What it writes** (below ``out``, the layout of ``results/``):
 
@@ -33,13 +15,6 @@ grasped_pose7]``) and ``recon_parms`` (sic). Test JSON: the same scene keys per 
 ``import_report.json``                      counts, the hand, the splits per task, every unusable file
 ==========================================  ======================================================
 
-**Frames.** tohgs's world has the table's top at z = 0 and every object's mesh frame at its centre of mass;
-the official world has the table's top at ``table_top`` (measured from ``table.obj``) and the meshes' own
-frames. An official pose ``(R, p)`` of an object whose centre of mass is ``c`` (its mesh frame) becomes
-``(R, p + R c - table_top e_z)``; a grasp's translation moves by ``-table_top e_z``
-(:func:`from_official_pose`, :func:`to_official_pose`). The scene stores record both (attrs ``official``),
-so the exporter writes the official frame back exactly.
-
 **Configurations.** The official dataset stores one grasp per row, each row with its own scene. Rows with
 identical scenes (bit-identical init pose, goal pose, obstacles, shelf, base) are one configuration with
 several grasps; other rows are a configuration each. This loses nothing (each grasp keeps its row, attrs
@@ -47,238 +22,45 @@ several grasps; other rows are a configuration each. This loses nothing (each gr
 the grasps of one scene side by side.
 
 **Unreadable files** (a bad pickle, a refused pickle global, missing keys, unequal list lengths, bad
-shapes, a position beyond :data:`POSITION_BOUND` of the origin, a missing listed file, a mesh that fails
-validation or exceeds the mesh limits, an official name that becomes the same tohgs name as another's) are
-counted and reported with their reasons (:class:`ImportReport`, ``import_report.json``), never skipped
-silently and never a crash. Pickles are read with a restricted unpickler (:func:`safe_loads`): numpy arrays,
-numpy scalars and plain containers only; an ``.npy`` header's shape and dtype are checked before its data,
-and every pose and grasp's shape before an array is built from it (a small file of shared references can
-describe gigabytes). An import is written into a temporary folder and renamed into place when complete.
-
-**The exporter** (:func:`export_official`) writes a prediction store as ``<run_dir>/<obj>.npy`` files of the
-official evaluation: a pickled dict with per grasp ``init_hand_vertex`` and ``goal_hand_vertex`` ((V, 3)
-float32, metres, official world frame; V is the hand model's vertex count: 778 for MANO, 1609 for the
-default anny hand), ``init_pose``, ``goal_pose``, and per task the obstacles, shelf and grasped object.
+shapes, a position beyond :data:`~tohgs.official.format.POSITION_BOUND` of the origin, a missing listed
+file, a mesh that fails validation or exceeds the mesh limits, an official name that becomes the same tohgs
+name as another's) are counted and reported with their reasons (:class:`ImportReport`,
+``import_report.json``), never skipped silently and never a crash; files are read safely
+(:mod:`tohgs.official.format`'s Reading). An import is written into a temporary folder and renamed into
+place when complete.
 """
 
 from __future__ import annotations
 
-import argparse
 import hashlib
-import io
 import json
 import logging
-import pickle
 import reprlib
-import unicodedata
-import zlib
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
 from tohgs.assets.decomposition import DecompositionSettings, cap_hull_vertices, convex_decomposition
 from tohgs.assets.manifest import record_object_files
 from tohgs.assets.mesh import (COLLISION_MESH, OBJECT_MESH, OBJECT_URDF, MeshError, MeshLimits, load_mesh,
                                mass_properties, repair_and_validate)
-from tohgs.assets.objects import CATALOG_COLUMNS, OBJECT_FILES, _urdf, _write_obj_parts
-from tohgs.assets.sources import TASK_SET_BRICKS, TASK_SET_OBJECTS, sanitise
+from tohgs.assets.objects import CATALOG_COLUMNS, OBJECT_FILES, object_urdf, write_obj_parts
+from tohgs.assets.sources import TASK_SET_BRICKS, TASK_SET_OBJECTS
 from tohgs.assets.supports import Box, Support, make_table
-from tohgs.data.predictions import read_predictions
-from tohgs.data.scenes import SceneSet, read_scenes, write_scenes
+from tohgs.data.scenes import SceneSet, write_scenes
 from tohgs.data.task_grasps import write_task_grasps
-from tohgs.geometry.grasp import GRASP_DIM, pose_matrix, transform_grasp
+from tohgs.geometry.grasp import pose_matrix, transform_grasp
 from tohgs.hand.assets import HandAssets
-from tohgs.hand.mano_backend import _NUMPY_GLOBALS, UnsafePickleError
 from tohgs.io import atomic_dir, atomic_path, write_json
+from tohgs.official.format import (DATASET_DIR, NO_PRIOR, POSITION_BOUND, SPLIT_OF, STACKING_SPLIT, TABLE_HEIGHT,
+                                   TABLE_SCALE, TASKS, Row, from_official_pose, load_official_npy, mesh_path,
+                                   object_name, parse_rows, shelf_name, shelf_path, shift_grasp)
 
 log = logging.getLogger(__name__)
-
-TASKS = ("placing", "shelving", "stacking")
-DATASET_DIR = "task_oriented_grasps_dataset"
-#: The Stacking split, hard-coded in the official training code (no train.txt / val.txt is read for it).
-STACKING_SPLIT = {"train": tuple("ACDEGHJLMOPQSTUWX"), "val": tuple("FIKNRV")}
-#: Where the official code puts the table: its scale of ``table.obj`` and the height of its origin, metres.
-TABLE_SCALE = (1.5, 1.0, 0.05)
-TABLE_HEIGHT = 0.6
-#: ``prior_index`` of an imported task grasp: it comes from no prior store.
-NO_PRIOR = -1
-#: Our split of the official lists: their evaluation reads ``val.txt``, so it is our test split.
-SPLIT_OF = {"train": "train", "val": "test"}
-_GRASP_KEY = {"placing": "recon_param", "shelving": "recon_param", "stacking": "recon_parms"}
-_SCENE_KEYS = {"placing": ("init_pose", "goal_pose", "obstacle_pose", "obstacle_name"),
-               "shelving": ("init_pose", "goal_pose", "obstacle_pose", "obstacle_name", "shelf_pose", "shelf_name"),
-               "stacking": ("init", "goal")}
-_QUAT_TOL = 1e-3  # largest |norm - 1| of an official quaternion that is renormalised rather than refused
-#: The farthest an official position (a pose's or a grasp's translation) may lie from the official world's
-#: origin, m: their scenes span a 1.5 m table; 1e6 m is a damaged file, refused rather than imported.
-POSITION_BOUND = 10.0
-#: The largest magnitude of a grasp's axis-angle component, rad (two full turns): beyond it no hand pose.
-ANGLE_BOUND = 4 * np.pi
-#: The most obstacles of one official row (their scenes have a handful): a bound on what a file of shared
-#: references (a list of one pose repeated) can make the importer build.
-MAX_OBSTACLES = 64
-
-
-# --- the restricted unpickler ----------------------------------------------------------------------------
-
-#: Globals an official pickle may name: numpy's array, dtype and scalar constructors (the MANO reader's
-#: set), numpy's out-of-band buffer constructor and the bytes decoder of protocol-2 pickles.
-_ALLOWED_GLOBALS = frozenset(_NUMPY_GLOBALS | {
-    ("numpy.core.numeric", "_frombuffer"), ("numpy._core.numeric", "_frombuffer"), ("_codecs", "encode")})
-
-
-class _DatasetUnpickler(pickle.Unpickler):
-    """Builds numpy arrays, numpy scalars and plain containers; any other global is refused."""
-
-    def find_class(self, module: str, name: str) -> Any:
-        import importlib
-
-        if (module, name) in _ALLOWED_GLOBALS:
-            return getattr(importlib.import_module(module), name)
-        raise UnsafePickleError(f"refusing global '{module}.{name}' (only numpy arrays and plain containers)")
-
-
-def safe_loads(data: bytes, source: str = "pickle") -> Any:
-    """Unpickle ``data`` allowing only numpy arrays, numpy scalars and plain containers.
-
-    Raises:
-        ValueError: a refused global (a pickle that would build another class or call a function) or an
-            unreadable pickle; the message names ``source``.
-    """
-    try:
-        return _DatasetUnpickler(io.BytesIO(data), encoding="latin1").load()
-    except UnsafePickleError as exc:
-        raise ValueError(f"{source}: {exc}") from exc
-    except Exception as exc:
-        raise ValueError(f"{source}: not a readable pickle ({type(exc).__name__}: {exc})") from exc
-
-
-def load_official_npy(data: bytes, source: str = "npy") -> Any:
-    """The object stored in an official ``.npy`` (``np.save`` of a dict) or a plain pickle file, read safely.
-
-    An ``.npy`` of an object array is its header and a pickle of the array: the header is parsed by numpy,
-    the pickle by :func:`safe_loads`; a 0-d object array gives its item (the dict). The header's shape and
-    dtype are checked before the data is read: an object array must be 0-d (what ``np.save`` of a dict
-    writes), another array must hold exactly the bytes its header declares (numpy would allocate the
-    declared size first).
-
-    Raises:
-        ValueError: unreadable or refused (the message names ``source``).
-    """
-    if not data.startswith(b"\x93NUMPY"):
-        return safe_loads(data, source)
-    fh = io.BytesIO(data)
-    try:
-        version = np.lib.format.read_magic(fh)
-        read_header = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}
-        if version not in read_header:
-            raise ValueError(f"unsupported .npy version {version}")
-        shape, _, dtype = read_header[version](fh)
-    except Exception as exc:
-        raise ValueError(f"{source}: not a readable .npy header ({exc})") from exc
-    if not dtype.hasobject:
-        body = len(data) - fh.tell()
-        declared = int(np.prod(shape, dtype=object)) * dtype.itemsize
-        if declared != body:
-            raise ValueError(f"{source}: the .npy header declares {dtype} {shape} ({declared} bytes) but the file "
-                             f"holds {body} bytes of data")
-        fh.seek(0)
-        return np.lib.format.read_array(fh, allow_pickle=False)
-    if shape != ():
-        raise ValueError(f"{source}: an object array of shape {shape}, expected a 0-d one holding a dict (what "
-                         "np.save of the official dict writes); not unpickled")
-    arr = safe_loads(fh.read(), source)
-    if not isinstance(arr, np.ndarray):
-        raise ValueError(f"{source}: the .npy body is a {type(arr).__name__}, expected an object array")
-    return arr.item() if arr.ndim == 0 else arr
-
-
-# --- frames --------------------------------------------------------------------------------------------
-
-def _fits(v: Any, shape: tuple[int, ...]) -> bool:
-    """Whether ``v`` (nested lists, tuples, numpy arrays, numbers) has ``shape`` with real numbers at the
-    leaves, decided without building an array: at most ``prod(shape)`` leaves are visited, so a structure of
-    shared references that would expand into gigabytes is refused at its first wrong length."""
-    if isinstance(v, np.ndarray) and v.dtype != object:
-        return v.shape == shape and v.dtype.kind in "iuf"
-    if not shape:
-        return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
-    if isinstance(v, np.ndarray):
-        if v.ndim == 0 or len(v) != shape[0]:
-            return False
-    elif not isinstance(v, (list, tuple)) or len(v) != shape[0]:
-        return False
-    return all(_fits(x, shape[1:]) for x in v)
-
-
-def _describe(v: Any) -> str:
-    """A short description of a value for a message (type and length or shape, never its whole repr)."""
-    if isinstance(v, np.ndarray):
-        return f"an array of shape {v.shape} ({v.dtype})"
-    if isinstance(v, (list, tuple)):
-        return f"a {type(v).__name__} of length {len(v)}"
-    return f"{type(v).__name__} {reprlib.repr(v)}"
-
-
-def _numbers(v: Any, shapes: tuple[tuple[int, ...], ...], what: str) -> np.ndarray:
-    """``v`` as a finite float64 array of the first of ``shapes`` it has (checked before it is built)."""
-    for shape in shapes:
-        if _fits(v, shape):
-            a = np.asarray(v, dtype=np.float64).reshape(shape)
-            if not np.isfinite(a).all():
-                raise ValueError(f"{what}: non-finite numbers")
-            return a
-    raise ValueError(f"{what}: {_describe(v)}, expected numbers of shape {' or '.join(map(str, shapes))}")
-
-
-def _unit_pose(pose: Any, what: str) -> np.ndarray:
-    """A ``[x, y, z, qx, qy, qz, qw]`` pose as float64 (7,) with its quaternion renormalised; a position
-    beyond :data:`POSITION_BOUND` is refused."""
-    p = _numbers(pose, ((7,),), f"{what} (xyz + xyzw quaternion)")
-    if np.abs(p[:3]).max() > POSITION_BOUND:
-        raise ValueError(f"{what}: position {reprlib.repr(p[:3].tolist())} m is beyond {POSITION_BOUND:g} m of the "
-                         "official world's origin")
-    n = np.linalg.norm(p[3:])
-    if abs(n - 1.0) > _QUAT_TOL:
-        raise ValueError(f"{what}: quaternion of norm {n:.6g}, not a rotation")
-    return np.r_[p[:3], p[3:] / n]
-
-
-def from_official_pose(pose: np.ndarray, offset: np.ndarray | None = None, table_top: float = 0.0) -> np.ndarray:
-    """An official pose in tohgs's frames.
-
-    Args:
-        pose: (7,) official pose of an object's mesh frame (m, xyzw quaternion).
-        offset: (3,) the object's centre of mass in its official mesh frame, m (None: 0, a support).
-        table_top: height of the table's top in the official world, m.
-
-    Returns:
-        (7,) the pose of tohgs's mesh frame (centre of mass at the origin) in tohgs's world (table top at 0).
-    """
-    p = _unit_pose(pose, "pose")
-    c = np.zeros(3) if offset is None else np.asarray(offset, dtype=np.float64)
-    R = Rotation.from_quat(p[3:]).as_matrix()
-    return np.r_[p[:3] + R @ c - [0.0, 0.0, table_top], p[3:]]
-
-
-def to_official_pose(pose: np.ndarray, offset: np.ndarray | None = None, table_top: float = 0.0) -> np.ndarray:
-    """The inverse of :func:`from_official_pose`: (7,) tohgs pose -> (7,) official pose."""
-    p = np.asarray(pose, dtype=np.float64)
-    c = np.zeros(3) if offset is None else np.asarray(offset, dtype=np.float64)
-    R = Rotation.from_quat(p[3:]).as_matrix()
-    return np.r_[p[:3] - R @ c + [0.0, 0.0, table_top], p[3:]]
-
-
-def shift_grasp(grasp: np.ndarray, dz: float) -> np.ndarray:
-    """(B, 51) grasps moved by ``dz`` metres along world z (a hand's translation moves every vertex by it)."""
-    g = np.array(grasp, dtype=np.float64, copy=True).reshape(-1, GRASP_DIM)
-    g[:, 2] += dz
-    return g
 
 
 # --- reading -------------------------------------------------------------------------------------------
@@ -302,6 +84,7 @@ class _Reader:
         """Record the digest of a file another reader (trimesh) will parse; returns its path."""
         self.read(rel)
         return self.root / rel
+
 
 
 @dataclass
@@ -351,170 +134,8 @@ class ImportReport:
         return {**asdict(self), "n_problems": self.n_problems}
 
 
-@dataclass
-class _Row:
-    """One official row (a grasp with its scene) or test configuration, in the official frame.
-
-    ``init``/``goal``: (7,) target poses; ``grasp``: (51,) or None (test); ``obstacles``: (name, (7,) pose);
-    ``shelf`` and ``base``: (name, (7,) pose) or None.
-    """
-
-    index: int
-    target: str
-    init: np.ndarray
-    goal: np.ndarray
-    grasp: np.ndarray | None
-    obstacles: list[tuple[str, np.ndarray]]
-    shelf: tuple[str, np.ndarray] | None
-    base: tuple[str, np.ndarray] | None
-
-    def scene_key(self) -> bytes:
-        """The bytes that make two rows the same configuration (exact equality of the scene)."""
-        parts = [self.target.encode(), self.init.tobytes(), self.goal.tobytes()]
-        for extra in (self.shelf, self.base, *self.obstacles):
-            parts += [b"|", b"-" if extra is None else extra[0].encode() + extra[1].tobytes()]
-        return b"\0".join(parts)
-
-
-def _name(v: Any, what: str) -> str:
-    """A name from a str, a numpy string scalar or a 0-d string array (their ``.item()`` quirk)."""
-    if isinstance(v, np.ndarray) and v.ndim == 0:
-        v = v.item()
-    if isinstance(v, bytes):
-        v = v.decode("utf-8", "replace")
-    if not isinstance(v, str) or not v:
-        raise ValueError(f"{what}: expected a name, got {_describe(v)}")
-    if ("/" in v or "\\" in v or v in (".", "..") or len(v) > 255
-            or any(unicodedata.category(c) in ("Cc", "Cs") for c in v)):
-        raise ValueError(f"{what}: {reprlib.repr(v)} is not a file name (names become paths below the root)")
-    return str(v)
-
-
-def _as_list(v: Any, what: str) -> list:
-    if isinstance(v, np.ndarray) and v.ndim >= 1:
-        return list(v)
-    if isinstance(v, (list, tuple)):
-        return list(v)
-    raise ValueError(f"{what}: a {type(v).__name__}, expected a list")
-
-
-def _grasp51(v: Any, what: str) -> np.ndarray:
-    """A (1, 51) or (51,) official grasp as float64 (51,); a translation beyond :data:`POSITION_BOUND` or an
-    axis-angle component beyond :data:`ANGLE_BOUND` is refused."""
-    g = _numbers(v, ((1, GRASP_DIM), (GRASP_DIM,)), what).reshape(GRASP_DIM)
-    if np.abs(g[:3]).max() > POSITION_BOUND:
-        raise ValueError(f"{what}: translation {reprlib.repr(g[:3].tolist())} m is beyond {POSITION_BOUND:g} m of "
-                         "the official world's origin")
-    if np.abs(g[3:]).max() > ANGLE_BOUND:
-        raise ValueError(f"{what}: an axis-angle component of {np.abs(g[3:]).max():.3g} rad, beyond "
-                         f"{ANGLE_BOUND:.3g} (two turns)")
-    return g
-
-
-def _stack_entry(v: Any, what: str) -> tuple[str, np.ndarray, str, np.ndarray]:
-    e = _as_list(v, what)
-    if len(e) != 4:
-        raise ValueError(f"{what}: {len(e)} entries, expected [base_name, base_pose, grasped_name, grasped_pose]")
-    return (_name(e[0], f"{what}[0]"), _unit_pose(e[1], f"{what}[1]"), _name(e[2], f"{what}[2]"),
-            _unit_pose(e[3], f"{what}[3]"))
-
-
-def _parse_rows(task: str, data: Any, stem: str, test: bool) -> list[_Row]:
-    """The rows of one official ``.npy`` (``test=False``) or test JSON (``test=True``) of ``task``.
-
-    Args:
-        task: ``placing``, ``shelving`` or ``stacking``.
-        data: the loaded dict.
-        stem: the file's object (its name without ``.npy`` / ``.json``).
-        test: a test JSON (no grasps; the target from ``grasped_obj_name``) rather than a grasp file.
-
-    Raises:
-        ValueError: not a dict, missing keys, unequal list lengths, a bad shape or name (the message names
-            the key and row).
-    """
-    if not isinstance(data, dict):
-        raise ValueError(f"expected a dict at the top, got {type(data).__name__}")
-    keys = list(_SCENE_KEYS[task]) + ([] if test else [_GRASP_KEY[task]])
-    if test and task != "stacking":
-        keys.append("grasped_obj_name")
-    missing = [k for k in keys if k not in data]
-    if missing:
-        raise ValueError(f"missing keys {missing} (the file has {sorted(map(str, data))})")
-    cols = {k: _as_list(data[k], k) for k in keys if k != "grasped_obj_name"}
-    targets = None
-    if test and task != "stacking":
-        g = data["grasped_obj_name"]
-        if isinstance(g, str):  # Placing: one name for the file; Shelving: a list, one per configuration
-            targets = [_name(g, "grasped_obj_name")] * len(cols[keys[0]])
-        else:
-            targets = _as_list(g, "grasped_obj_name")
-        cols["grasped_obj_name"] = targets
-    lengths = {k: len(v) for k, v in cols.items()}
-    if len(set(lengths.values())) > 1:
-        raise ValueError("unequal list lengths: " + ", ".join(f"{k} {n}" for k, n in lengths.items()))
-    rows = []
-    for i in range(len(cols[keys[0]])):
-        grasp = None if test else _grasp51(cols[_GRASP_KEY[task]][i], f"{_GRASP_KEY[task]}[{i}]")
-        if task == "stacking":
-            base, base_pose, target, init = _stack_entry(cols["init"][i], f"init[{i}]")
-            g_base, _, g_target, goal = _stack_entry(cols["goal"][i], f"goal[{i}]")
-            if (g_base, g_target) != (base, target):
-                raise ValueError(f"goal[{i}]: bricks ({g_base}, {g_target}) differ from init's ({base}, {target})")
-            if not test and target != stem:
-                raise ValueError(f"init[{i}]: grasped brick '{target}' is not the file's brick '{stem}'")
-            rows.append(_Row(i, target, init, goal, grasp, [], None, (base, base_pose)))
-            continue
-        names = _as_list(cols["obstacle_name"][i], f"obstacle_name[{i}]")
-        poses = _as_list(cols["obstacle_pose"][i], f"obstacle_pose[{i}]")
-        if max(len(names), len(poses)) > MAX_OBSTACLES:
-            raise ValueError(f"row {i}: {len(names)} obstacle names and {len(poses)} poses, more than "
-                             f"{MAX_OBSTACLES} obstacles")
-        if len(names) != len(poses):
-            raise ValueError(f"row {i}: {len(names)} obstacle names but {len(poses)} obstacle poses")
-        obstacles = [(_name(n, f"obstacle_name[{i}][{j}]"), _unit_pose(p, f"obstacle_pose[{i}][{j}]"))
-                     for j, (n, p) in enumerate(zip(names, poses))]
-        shelf = None
-        if task == "shelving":
-            shelf = (_name(cols["shelf_name"][i], f"shelf_name[{i}]"),
-                     _unit_pose(cols["shelf_pose"][i], f"shelf_pose[{i}]"))
-        target = stem if targets is None else _name(targets[i], f"grasped_obj_name[{i}]")
-        rows.append(_Row(i, target, _unit_pose(cols["init_pose"][i], f"init_pose[{i}]"),
-                         _unit_pose(cols["goal_pose"][i], f"goal_pose[{i}]"), grasp, obstacles, shelf, None))
-    return rows
-
 
 # --- objects and supports --------------------------------------------------------------------------------
-
-def _sanitised(official: str) -> str:
-    """An official name in the wildcard alphabet (:func:`tohgs.assets.sources.sanitise`); a name with no letter
-    or digit of it (``日本``) becomes ``u<CRC-32 of its UTF-8>``, as a user folder's file does."""
-    try:
-        return sanitise(official)
-    except ValueError:
-        return f"u{zlib.crc32(official.encode('utf-8', 'surrogateescape')):08x}"
-
-
-def object_name(official: str, brick: bool) -> str:
-    """tohgs's name of an official object: ``off-<name>``, or ``off-brick-<name>`` for a brick."""
-    return f"off-brick-{_sanitised(official)}" if brick else f"off-{_sanitised(official)}"
-
-
-def shelf_name(official: str) -> str:
-    """tohgs's support name of an official shelf: ``shelf-<name>``."""
-    return f"shelf-{_sanitised(official)}"
-
-
-def shelf_path(official: str) -> str:
-    """The official mesh of a shelf, relative to the tree's root."""
-    return f"models/selected_shelf/{official}/coacd/decomposed.obj"
-
-
-def mesh_path(official: str, brick: bool) -> str:
-    """The official mesh of an object or brick, relative to the tree's root."""
-    if brick:
-        return f"models/brick/{official}/textured_simple.obj"
-    return f"models/meshdata/{official}/coacd/decomposed_scaled.obj"
-
 
 def _import_object(reader: _Reader, official: str, brick: bool, out_dir: Path, density: float,
                    decomposition: DecompositionSettings, cache_dir: str | Path | None,
@@ -556,8 +177,8 @@ def _import_object(reader: _Reader, official: str, brick: bool, out_dir: Path, d
             return meta
         mp = mass_properties(mesh, density)
         mesh.export(tmp / OBJECT_MESH)
-        _write_obj_parts(tmp / COLLISION_MESH, parts)
-        (tmp / OBJECT_URDF).write_text(_urdf(name, mp.mass, mp.inertia))
+        write_obj_parts(tmp / COLLISION_MESH, parts)
+        (tmp / OBJECT_URDF).write_text(object_urdf(name, mp.mass, mp.inertia))
         meta.update(
             official_offset=centre.tolist(), scale=1.0, extents=mesh.extents.tolist(), bounds=mesh.bounds.tolist(),
             volume=mp.volume, mass=mp.mass, density=density, inertia=mp.inertia.tolist(),
@@ -619,6 +240,7 @@ def _shelf_support(reader: _Reader, official: str, report: ImportReport, limits:
                    {"official_name": official, "source": rel, "box_fill": fill})
 
 
+
 # --- the importer ----------------------------------------------------------------------------------------
 
 def _read_list(reader: _Reader, rel: str) -> list[str]:
@@ -656,7 +278,7 @@ def _task_files(reader: _Reader, task: str, report: ImportReport) -> dict[str, s
     return files
 
 
-def _load_rows(reader: _Reader, rel: str, task: str, stem: str, test: bool, report: ImportReport) -> list[_Row] | None:
+def _load_rows(reader: _Reader, rel: str, task: str, stem: str, test: bool, report: ImportReport) -> list[Row] | None:
     """The rows of one grasp file or test JSON, or None with the problem reported."""
     if not reader.exists(rel):
         report.problem(rel, "missing", "the test configurations of an evaluated (val) object are not there" if test
@@ -665,7 +287,7 @@ def _load_rows(reader: _Reader, rel: str, task: str, stem: str, test: bool, repo
     try:
         data = reader.read(rel)
         content = json.loads(data) if test else load_official_npy(data, rel)
-        return _parse_rows(task, content, stem, test)
+        return parse_rows(task, content, stem, test)
     except Exception as exc:  # noqa: BLE001 - a bad file is counted and reported, never a crash
         msg = str(exc)
         report.problem(rel, "unreadable", msg[len(rel) + 2:] if msg.startswith(f"{rel}: ") else msg)
@@ -688,10 +310,10 @@ class _Frame:
                 "supports": {n: self.supports.get(n, n) for n in supports}}
 
 
-def _scene_set(task: str, target: str, rows: list[_Row], frame: _Frame, file: str, config_attrs: dict[str, Any],
+def _scene_set(task: str, target: str, rows: list[Row], frame: _Frame, file: str, config_attrs: dict[str, Any],
                group: bool = True) -> tuple[SceneSet, np.ndarray]:
     """The configurations of ``rows`` and each row's configuration: with ``group``, rows of the same scene
-    (:meth:`_Row.scene_key`) are one configuration, in the order of first appearance; without, one per row."""
+    (:meth:`Row.scene_key`) are one configuration, in the order of first appearance; without, one per row."""
     keys: dict[bytes, int] = {}
     config_of = np.array([keys.setdefault(r.scene_key() if group else bytes(str(i), "ascii"), len(keys))
                           for i, r in enumerate(rows)], dtype=np.int64)
@@ -729,7 +351,7 @@ def _scene_set(task: str, target: str, rows: list[_Row], frame: _Frame, file: st
     return scenes, config_of
 
 
-def _write_task(task: str, target: str, rows: list[_Row], file: str, frame: _Frame, out: Path, wrist: np.ndarray,
+def _write_task(task: str, target: str, rows: list[Row], file: str, frame: _Frame, out: Path, wrist: np.ndarray,
                 config_attrs: dict[str, Any]) -> tuple[int, int]:
     """Write the scene and task-grasp stores of one target's rows; returns (configurations, grasps)."""
     scenes, config_of = _scene_set(task, target, rows, frame, file, config_attrs)
@@ -818,7 +440,7 @@ def import_official(root: str | Path, out: str | Path, hand: HandAssets, tasks: 
     return report
 
 
-def _row_names(r: _Row, task: str) -> list[tuple[str, str]]:
+def _row_names(r: Row, task: str) -> list[tuple[str, str]]:
     """The ``(kind, official name)`` of the objects (``object`` or ``brick``) and the shelf a row uses."""
     kind = "brick" if task == "stacking" else "object"
     names = [(kind, n) for n in [r.target, *(o for o, _ in r.obstacles), *([r.base[0]] if r.base else [])]]
@@ -837,8 +459,8 @@ def _official_path(key: tuple[str, str]) -> str:
     return shelf_path(official) if kind == "shelf" else mesh_path(official, kind == "brick")
 
 
-def _name_clashes(loaded: list[tuple[str, str, str, list[_Row], bool]], report: ImportReport
-                  ) -> list[tuple[str, str, str, list[_Row], bool]]:
+def _name_clashes(loaded: list[tuple[str, str, str, list[Row], bool]], report: ImportReport
+                  ) -> list[tuple[str, str, str, list[Row], bool]]:
     """Official names (objects, bricks, shelves) that become the same tohgs name (``Shelf_01``, ``shelf-01``):
     in sorted order the first keeps the name; each later one is a problem naming both files and is left out,
     with every row and test configuration that uses it. Returns ``loaded`` without those rows."""
@@ -881,7 +503,7 @@ def _import(root: Path, out: Path, final: Path, hand: HandAssets, tasks: list[st
     config_attrs = {"source": "official", "root": str(root)}
 
     # 1. Read every listed file.
-    loaded: list[tuple[str, str, str, list[_Row], bool]] = []  # (task, file, split, rows, test)
+    loaded: list[tuple[str, str, str, list[Row], bool]] = []  # (task, file, split, rows, test)
     for task in tasks:
         stats = report.tasks.setdefault(task, dict.fromkeys(
             ("files", "rows", "configurations", "test_files", "test_configurations", "targets"), 0))
@@ -1022,7 +644,7 @@ def read_import(root: str | Path) -> ImportedDataset:
     report_path, catalog_path = root / "import_report.json", root / "objects" / "catalog.csv"
     for p in (report_path, catalog_path):
         if not p.is_file():
-            raise FileNotFoundError(f"{p}: not found; write the import first: python -m tohgs.data.official "
+            raise FileNotFoundError(f"{p}: not found; write the import first: python -m tohgs.official "
                                     f"import <official root> {root}")
     report = json.loads(report_path.read_text())
     if not report.get("hand") or not isinstance(report.get("splits"), dict):
@@ -1040,148 +662,3 @@ def read_import(root: str | Path) -> ImportedDataset:
     return ImportedDataset(root, tuple(sorted(catalog.name)), report["hand"], report["splits"],
                            int(report.get("n_problems", 0)))
 
-
-# --- the exporter ----------------------------------------------------------------------------------------
-
-def export_official(predictions: str | Path, scenes_dir: str | Path, hand: HandAssets, run_dir: str | Path,
-                    default_table_top: float = TABLE_HEIGHT) -> dict[str, Path]:
-    """Write a prediction store in the official evaluation's output format, ``<run_dir>/<obj>.npy``.
-
-    Each file is ``np.save`` of a dict (numpy arrays, lists, strings only), one entry per kept grasp, in the
-    order of the official configurations and then the samples (the official evaluation's order):
-
-    - ``init_hand_vertex``, ``goal_hand_vertex``: (V, 3) float32, metres, the official world frame: the
-      vertices of ``hand`` posed by the grasp (V = ``len(hand.rest_vertices)``: 778 for MANO, 1609 for anny;
-      the official evaluation scripts expect MANO's 778).
-    - ``init_pose``, ``goal_pose``: the target's official pose (7 floats), or for Stacking
-      ``[base_name, base_pose, grasped_name, grasped_pose]`` (the base at its one stored pose in both).
-    - Placing and Shelving: ``obstacle_name``, ``obstacle_pose`` (lists per grasp) and ``grasped_obj``
-      (the target's official name); Shelving also ``shelf_name`` and ``shelf_pose``.
-    - Added by tohgs (the official readers ignore them): ``init_recon_param``, ``goal_recon_param``
-      ((51,) float32 grasps in the official frame), ``config`` (the official configuration index),
-      ``sample``, ``hand_model`` and ``n_hand_vertices``.
-
-    Args:
-        predictions: a prediction store (:mod:`tohgs.data.predictions`).
-        scenes_dir: the scene stores its ``config_index`` refers to (``<scenes_dir>/<task>/<object>.zarr``):
-            the importer's ``test_scenes``, or tohgs's own ``results/scenes``.
-        hand: the hand that poses the grasps (the one that made them).
-        run_dir: the output folder (the official ``result/<run>``).
-        default_table_top: the official table top for scene stores that were not imported (tohgs's own:
-            object names and mesh frames are then kept as they are).
-
-    Returns:
-        ``{file stem: path}`` of the files written. A file is named after the official file its
-        configurations came from (``test/<obj>.json`` -> ``<obj>.npy``), else after the tohgs object.
-
-    Raises:
-        ValueError: a store that cannot be read, or a configuration index outside its scene store.
-    """
-    arrays, attrs = read_predictions(predictions)
-    task, objects = attrs["task"], list(attrs["objects"])
-    run_dir = Path(run_dir)
-    files: dict[str, list[tuple[tuple[int, int], dict[str, Any]]]] = {}
-    grasped: dict[str, str] = {}
-    for oid in np.unique(arrays["object_id"]):
-        path = Path(scenes_dir) / task / f"{objects[oid]}.zarr"
-        scenes = read_scenes(path)
-        off = scenes.attrs.get("official") or {}
-        top = float(off.get("table_top", default_table_top))
-        names, offsets, snames = off.get("names", {}), off.get("offsets", {}), off.get("supports", {})
-        stem = Path(off["file"]).stem if off.get("file") else scenes.object
-        index = off.get("index") or list(range(len(scenes)))
-
-        def official(name: str, pose: np.ndarray, top: float = top, names: dict = names, offsets: dict = offsets
-                     ) -> tuple[str, list[float]]:
-            return names.get(name, name), to_official_pose(pose, offsets.get(name), top).tolist()
-
-        target = names.get(scenes.object, scenes.object)
-        grasped[stem] = target
-        for r in np.flatnonzero(arrays["object_id"] == oid):
-            c = int(arrays["config_index"][r])
-            if not 0 <= c < len(scenes):
-                raise ValueError(f"{predictions}: configuration {c} of '{scenes.object}' is outside {path} "
-                                 f"({len(scenes)} configurations)")
-            keep = np.flatnonzero(arrays["kept"][r])
-            g_init = shift_grasp(arrays["grasp_init"][r, keep], top)
-            g_goal = shift_grasp(arrays["grasp_goal"][r, keep], top)
-            v_init = hand.vertices(g_init).astype(np.float32)
-            v_goal = hand.vertices(g_goal).astype(np.float32)
-            _, init = official(scenes.object, scenes.target_init_pose[c])
-            _, goal = official(scenes.object, scenes.target_goal_pose[c])
-            base = scenes.base(c)
-            for k, s in enumerate(keep):
-                e: dict[str, Any] = {"init_hand_vertex": v_init[k], "goal_hand_vertex": v_goal[k],
-                                     "init_recon_param": g_init[k].astype(np.float32),
-                                     "goal_recon_param": g_goal[k].astype(np.float32),
-                                     "config": int(index[c]), "sample": int(s)}
-                if task == "stacking":
-                    b = official(*base) if base is not None else ("", [float("nan")] * 7)
-                    e["init_pose"], e["goal_pose"] = [b[0], b[1], target, init], [b[0], b[1], target, goal]
-                else:
-                    e["init_pose"], e["goal_pose"] = init, goal
-                    obs = [official(n, p) for n, p in scenes.obstacles(c)]
-                    e["obstacle_name"], e["obstacle_pose"] = [n for n, _ in obs], [p for _, p in obs]
-                if task == "shelving":
-                    sname, spose = scenes.support(c)
-                    e["shelf_name"] = snames.get(sname, sname)
-                    e["shelf_pose"] = to_official_pose(spose, None, top).tolist()
-                files.setdefault(stem, []).append(((int(index[c]), int(s)), e))
-    written = {}
-    for stem, entries in files.items():
-        entries.sort(key=lambda x: x[0])
-        keys = list(entries[0][1]) if entries else []
-        output: dict[str, Any] = {k: [e[k] for _, e in entries] for k in keys}
-        if task != "stacking":
-            output["grasped_obj"] = grasped[stem]
-        output.update(hand_model=hand.name, n_hand_vertices=int(len(hand.rest_vertices)))
-        path = run_dir / f"{stem}.npy"
-        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-            np.save(fh, np.array(output, dtype=object), allow_pickle=True)
-        written[stem] = path
-    log.info("official export: %d files, %d grasps into %s", len(written), sum(len(v) for v in files.values()), run_dir)
-    return written
-
-
-# --- the command line ------------------------------------------------------------------------------------
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m tohgs.data.official import ROOT OUT`` / ``export PREDICTIONS SCENES_DIR RUN_DIR``."""
-    from tohgs.hand import load_hand_assets
-
-    parser = argparse.ArgumentParser(prog="python -m tohgs.data.official", description=__doc__.split("\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True)
-    imp = sub.add_parser("import", help="official tree -> tohgs stores")
-    imp.add_argument("root")
-    imp.add_argument("out")
-    imp.add_argument("--tasks", nargs="+", default=list(TASKS), choices=TASKS)
-    imp.add_argument("--density", type=float, default=500.0)
-    imp.add_argument("--cache-dir", default=None)
-    imp.add_argument("--max-faces", type=int, default=MeshLimits.max_faces,
-                     help="largest mesh to parse, faces (objects.limits.max_faces)")
-    imp.add_argument("--max-file-mb", type=float, default=MeshLimits.max_file_mb,
-                     help="largest mesh file to parse, MB (objects.limits.max_file_mb)")
-    exp = sub.add_parser("export", help="tohgs prediction store -> official result/<run>/<obj>.npy")
-    exp.add_argument("predictions")
-    exp.add_argument("scenes_dir")
-    exp.add_argument("run_dir")
-    for p in (imp, exp):
-        p.add_argument("--hand", default="anny", choices=("anny", "mano"))
-        p.add_argument("--mano-path", default=None)
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(message)s")
-    hand = load_hand_assets(args.hand, args.mano_path)
-    if args.command == "import":
-        report = import_official(args.root, args.out, hand, args.tasks, args.density, cache_dir=args.cache_dir,
-                                 limits=MeshLimits(args.max_faces, args.max_file_mb))
-        for p in report.problems:
-            print(f"{p['kind']}: {p['path']}: {p['reason']}")
-        print(f"{report.files_read} files read, {report.n_problems} problems; {report.tasks}")
-        return 1 if report.n_problems else 0
-    for stem, path in export_official(args.predictions, args.scenes_dir, hand, args.run_dir).items():
-        print(f"{stem}: {path}")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
