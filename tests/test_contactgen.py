@@ -218,7 +218,7 @@ def test_the_representation_check_sees_a_collapsed_contact_latent(built):  # noq
     from tohgs.models.checks import representation_fit
 
     tmp, hand, _, _, _ = built
-    model, _ = _prepared("contact_gen", CONTACT_GEN, tmp / "shard-0.zarr", hand)
+    model, _ = prepared_component("contact_gen", CONTACT_GEN, tmp / "shard-0.zarr", hand)
     model.eval()
     data = MapDataset([tmp / "shard-0.zarr"], per="grasp")
     with torch.no_grad():  # a contact map of about half the points, varying with the latent

@@ -6,12 +6,10 @@ from __future__ import annotations
 
 import torch
 
-from tests.test_maps import built  # noqa: F401  (the module-scoped fixture)
+from helpers import SMALL_PN
 from tohgs.data.maps import MapDataset
 from tohgs.models.checks import permuted_map_gap
 from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
-
-SMALL_PN = {"sa": [[32, 0.03, 8, [16, 32]], [0, 0.0, 0, [32]]], "fp": [[32], [32]]}
 
 
 class PerPoint(ContactDiffuser):
@@ -28,7 +26,7 @@ class PerPoint(ContactDiffuser):
         return x0 if self.schedule.cfg.prediction == "sample" else (x_t - a.sqrt() * x0) / (1 - a).sqrt()
 
 
-def test_a_per_point_denoiser_scores_true_and_permuted_maps_alike(built):  # noqa: F811
+def test_a_per_point_denoiser_scores_true_and_permuted_maps_alike(built):
     tmp = built[0]
     data = MapDataset([tmp / "shard-0.zarr"], per="grasp")
     per_point = PerPoint(ContactDiffuserConfig(d_model=16, n_blocks=1, pointnet=SMALL_PN)).eval()
