@@ -219,6 +219,30 @@ def _iou(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return torch.where(union > 0, inter / union.clamp_min(1), torch.ones_like(inter))
 
 
+def _configurations(data: MapDataset, max_configs: int) -> tuple[dict[tuple[int, int], list[int]], list[tuple[int, int]]]:
+    """The items of ``data`` by (shard, configuration), and the first ``max_configs`` of those keys."""
+    by_config: dict[tuple[int, int], list[int]] = {}
+    for i, (s, r) in enumerate(data.index):
+        by_config.setdefault((s, int(data.shards[s].grasp_config[r])), []).append(i)
+    return by_config, list(by_config)[:max_configs]
+
+
+def _other_config_ious(data: MapDataset, by_config: dict, key: tuple[int, int], true: torch.Tensor,
+                       threshold: float) -> list[float]:
+    """The best IoU with the (G, N) boolean ``true`` maps of configuration ``key`` of each true map of the
+    other configurations of its object (a predictor that draws one of the object's grasps without looking
+    at the scene)."""
+    s, c = key
+    obj = int(data.shards[s].object_id[c])
+    others = [i for (s2, c2), ids in by_config.items() if (s2, c2) != (s, c)
+              and int(data.shards[s2].object_id[c2]) == obj and data.shards[s2].attrs["objects"] == data.shards[s].attrs["objects"]
+              for i in ids]
+    if not others:
+        return []
+    other = torch.as_tensor(np.stack([data[i]["contact"] for i in others])) > threshold
+    return _iou(other, true).max(-1).values.tolist()
+
+
 @torch.no_grad()
 def contact_fit(model, data: MapDataset, max_configs: int = 24, samples: int = 4, steps: int = 20,
                 sampler: str = "ddim", threshold: float = 0.5, seed: int = 0) -> dict:
@@ -237,21 +261,12 @@ def contact_fit(model, data: MapDataset, max_configs: int = 24, samples: int = 4
         points in contact; the ground truth's as ``true_contact_fraction``).
     """
     g = torch.Generator().manual_seed(seed)
-    by_config: dict[tuple[int, int], list[int]] = {}
-    for i, (s, r) in enumerate(data.index):
-        by_config.setdefault((s, int(data.shards[s].grasp_config[r])), []).append(i)
-    keys = list(by_config)[:max_configs]
+    by_config, keys = _configurations(data, max_configs)
     ious, base, frac, true_frac = [], [], [], []
-    for s, c in keys:
-        items = [data[i] for i in by_config[(s, c)]]
+    for key in keys:
+        items = [data[i] for i in by_config[key]]
         true = torch.as_tensor(np.stack([it["contact"] for it in items])) > threshold
-        obj = int(data.shards[s].object_id[c])
-        others = [i for (s2, c2), ids in by_config.items() if (s2, c2) != (s, c)
-                  and int(data.shards[s2].object_id[c2]) == obj and data.shards[s2].attrs["objects"] == data.shards[s].attrs["objects"]
-                  for i in ids]
-        if others:
-            other = torch.as_tensor(np.stack([data[i]["contact"] for i in others])) > threshold
-            base += _iou(other, true).max(-1).values.tolist()
+        base += _other_config_ious(data, by_config, key, true, threshold)
         it = items[0]
         pts = torch.as_tensor(it["points"])[None].expand(samples, -1, -1)
         nrm = torch.as_tensor(it["normals"])[None].expand(samples, -1, -1)
@@ -287,24 +302,15 @@ def representation_fit(model, hand: HandModel, data: MapDataset, curve: list[dic
     from tohgs.geometry.contact_parts import N_PARTS, part_contact
 
     g = torch.Generator().manual_seed(seed)
-    by_config: dict[tuple[int, int], list[int]] = {}
-    for i, (s, r) in enumerate(data.index):
-        by_config.setdefault((s, int(data.shards[s].grasp_config[r])), []).append(i)
-    keys = list(by_config)[:max_configs]
+    by_config, keys = _configurations(data, max_configs)
     alpha = float(data.shards[0].attrs["alpha_contact"])
     ious, base, frac, true_frac, alike, agree = [], [], [], [], [], []
     hist_s, hist_t = torch.zeros(N_PARTS), torch.zeros(N_PARTS)
-    for s, c in keys:
-        items = [data[i] for i in by_config[(s, c)]]
+    for key in keys:
+        items = [data[i] for i in by_config[key]]
         truth = Batch.collate(items)
         true = truth.contact > threshold  # (G, N)
-        obj = int(data.shards[s].object_id[c])
-        others = [i for (s2, c2), ids in by_config.items() if (s2, c2) != (s, c)
-                  and int(data.shards[s2].object_id[c2]) == obj and data.shards[s2].attrs["objects"] == data.shards[s].attrs["objects"]
-                  for i in ids]
-        if others:
-            other = torch.as_tensor(np.stack([data[i]["contact"] for i in others])) > threshold
-            base += _iou(other, true).max(-1).values.tolist()
+        base += _other_config_ious(data, by_config, key, true, threshold)
         rep = model.sample_representation(Batch.collate([items[0]] * samples), g)
         pred = rep.contact > threshold  # (S, N)
         iou = _iou(pred, true)  # (S, G)
