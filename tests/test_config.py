@@ -9,7 +9,8 @@ import sys
 import pytest
 import yaml
 
-from tohgs.config import ConfigError, _deep_update, iter_schema_keys, load_schema, validate_config
+from tohgs.config import ConfigError, iter_schema_keys, load_schema, validate_config
+from tohgs.settings import merge
 
 
 def test_every_schema_key_has_description_and_default():
@@ -86,7 +87,7 @@ def test_defaults_are_filled_in_place():
 )
 def test_invalid_config_names_key_and_problem(default_config, patch, key, problem):
     cfg = copy.deepcopy(default_config)
-    _deep_update(cfg, patch)
+    merge(cfg, patch)
     with pytest.raises(ConfigError) as exc:
         validate_config(cfg)
     msg = str(exc.value)
@@ -212,7 +213,7 @@ def test_the_upright_overlay_adds_an_upright_row_and_leaves_the_faithful_one_in_
     with open(repo / "config/config.yaml") as fh:
         cfg = yaml.safe_load(fh)
     with open(repo / "config/upright.yaml") as fh:
-        _deep_update(cfg, yaml.safe_load(fh))
+        merge(cfg, yaml.safe_load(fh))
     cfg = validate_config(cfg, base_dir=repo)
     comps, methods = cfg["components"], cfg["methods"]
     assert cfg["training"]["rotation"] == "so3"

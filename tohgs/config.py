@@ -20,6 +20,7 @@ import yaml
 
 from tohgs.methods import NOT_COMPONENT_KEYS, method_components, method_kind_exists
 from tohgs.models import component_kind_exists
+from tohgs.settings import merge
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SCHEMA_PATH = REPO_ROOT / "workflow" / "schemas" / "config.schema.yaml"
@@ -64,7 +65,7 @@ def _fill_defaults(instance: Any, schema: Mapping[str, Any]) -> None:
         if key not in instance and "default" in sub:
             instance[key] = copy.deepcopy(sub["default"])
         elif key in instance and sub.get("x-merge-default") and isinstance(instance[key], dict):
-            _merge_missing(instance[key], sub.get("default", {}))
+            merge(instance[key], sub.get("default", {}), overwrite=False)
         if key in instance:
             _fill_defaults(instance[key], sub)
     entries = schema.get("additionalProperties")
@@ -72,15 +73,6 @@ def _fill_defaults(instance: Any, schema: Mapping[str, Any]) -> None:
         for key, value in instance.items():
             if key not in schema.get("properties", {}):
                 _fill_defaults(value, entries)
-
-
-def _merge_missing(dst: dict[str, Any], src: Mapping[str, Any]) -> None:
-    """Add ``src``'s keys that ``dst`` lacks, recursively into mappings both have (``dst`` wins)."""
-    for k, v in src.items():
-        if k not in dst:
-            dst[k] = copy.deepcopy(v)
-        elif isinstance(dst[k], dict) and isinstance(v, Mapping):
-            _merge_missing(dst[k], v)
 
 
 def _error_message(err: jsonschema.ValidationError) -> str:
@@ -446,28 +438,8 @@ def load_config(path: Path | str, overrides: Mapping[str, Any] | None = None) ->
     with open(path) as fh:
         cfg = yaml.safe_load(fh) or {}
     if overrides:
-        _deep_update(cfg, overrides)
+        merge(cfg, overrides)
     return validate_config(cfg)
-
-
-def _deep_update(dst: dict[str, Any], src: Mapping[str, Any]) -> None:
-    for k, v in src.items():
-        if isinstance(v, Mapping) and isinstance(dst.get(k), dict):
-            _deep_update(dst[k], v)
-        else:
-            dst[k] = copy.deepcopy(v)
-
-
-def settings_from(cls, values: Mapping[str, Any] | None):
-    """An instance of the frozen settings dataclass ``cls`` from a config mapping: YAML lists become
-    tuples; a key ``cls`` does not have raises ``ValueError`` naming it."""
-    import dataclasses
-
-    values = dict(values or {})
-    unknown = set(values) - {f.name for f in dataclasses.fields(cls)}
-    if unknown:
-        raise ValueError(f"{cls.__name__}: unknown settings {sorted(unknown)}")
-    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
 
 
 def drop_ground_truth_rows(cfg: dict[str, Any], reason: str) -> list[str]:

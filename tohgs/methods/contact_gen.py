@@ -18,10 +18,10 @@ from dataclasses import fields
 import numpy as np
 import torch
 
-from tohgs.config import settings_from
 from tohgs.geometry.contact_parts import PartContact
 from tohgs.grasps.contactgen_solver import SolverSettings, solve_many
 from tohgs.methods.base import Method, Prediction, Request
+from tohgs.settings import settings_from
 
 
 class ContactGenMethod(Method):

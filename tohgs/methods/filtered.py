@@ -25,10 +25,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from tohgs.config import settings_from
 from tohgs.geometry.cloud import penetration_fraction
 from tohgs.geometry.registration import ICPSettings, register_many, transform_error
 from tohgs.methods.base import Method, Prediction, Request
+from tohgs.settings import settings_from
 
 TRANSFORMS = ("icp", "true")
 

@@ -16,10 +16,10 @@ import time
 import numpy as np
 import torch
 
-from tohgs.config import settings_from
 from tohgs.geometry.hand_object import contact_values
 from tohgs.grasps.flex import FlexSettings, optimise_many
 from tohgs.methods.base import Method, Prediction, Request
+from tohgs.settings import settings_from
 
 
 class Flex(Method):

@@ -24,10 +24,10 @@ import time
 import numpy as np
 import torch
 
-from tohgs.config import settings_from
 from tohgs.grasps.tta import TTASettings, adapt_many, by_problem, pose_problems
 from tohgs.methods.base import Method, Prediction, Request
 from tohgs.methods.contact_grasp import GROUND_TRUTH, NO_CONTACT, smooth_contact
+from tohgs.settings import settings_from
 
 
 class GraspTTA(Method):

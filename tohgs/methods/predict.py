@@ -18,15 +18,14 @@ from typing import Any
 import numpy as np
 import torch
 
-from tohgs.config import settings_from
 from tohgs.data.batch import Batch
 from tohgs.data.maps import MapDataset
 from tohgs.data.predictions import read_predictions, write_predictions
 from tohgs.geometry.grasp import GRASP_DIM, transform_grasp
 from tohgs.methods import method_kind_exists, method_kinds
 from tohgs.methods.base import Method, PredictSettings, Request
-from tohgs.models.checkpoint import load_component
-from tohgs.models.train import pick_device
+from tohgs.models.checkpoint import load_component, pick_device
+from tohgs.settings import settings_from
 
 log = logging.getLogger(__name__)
 

@@ -32,13 +32,13 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from tohgs.config import settings_from
 from tohgs.data.batch import Batch
 from tohgs.geometry.contact_parts import N_PARTS, PartContact, part_contact
 from tohgs.hand.model import HandModel
 from tohgs.models.component import Component
 from tohgs.models.grasp_cvae import _mlp
 from tohgs.models.pointnet2 import PointNet2, PointNet2Config
+from tohgs.settings import settings_from
 
 STAGES = ("contact", "part", "direction")
 

@@ -24,13 +24,13 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from tohgs.config import settings_from
 from tohgs.data.batch import Batch
 from tohgs.geometry.hand_object import contact_values
 from tohgs.hand.model import HandModel
 from tohgs.models.component import Component
 from tohgs.models.grasp_cvae import ENCODER_SCALE, _mlp, bbox_diagonal
 from tohgs.models.pointnet2 import PointNet
+from tohgs.settings import settings_from
 
 
 @dataclass(frozen=True)

@@ -40,14 +40,14 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from tohgs.config import settings_from
 from tohgs.data.batch import Batch
 from tohgs.geometry.grasp import GRASP_DIM
-from tohgs.geometry.rot6d import VECTOR_DIM, grasp_from_palm_rot6d, palm_rot6d
 from tohgs.geometry.hand_object import contact_values, inside_hand, vertex_normals
+from tohgs.geometry.rot6d import VECTOR_DIM, grasp_from_palm_rot6d, palm_rot6d
 from tohgs.hand.model import HandModel
 from tohgs.models.component import Component, seen_grasps
 from tohgs.models.pointnet2 import PointNet
+from tohgs.settings import settings_from
 
 PAPER_POINTS = 2048  # the point sums of L_pen and L_cons are scaled to this many points
 # The PointNets read coordinates (and the bounding-box diagonal) in decimetres: in metres a hand or an

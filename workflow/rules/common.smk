@@ -1,5 +1,6 @@
 # Configuration validation, the object selection, the components, methods and tables of the config, the
 # derived code of each rule and helper functions.
+import copy
 import hashlib
 import os
 import re
@@ -14,7 +15,7 @@ if str(REPO) not in sys.path:  # parse time only; jobs import the installed pack
 
 from tohgs.code_inputs import code_inputs
 from tohgs.config import (ConfigError, add_seed_replicas, drop_ground_truth_rows, load_schema, method_setting_keys,
-                          settings_from, validate_config)
+                          validate_config)
 from tohgs.assets.objects import check_split_sizes, read_catalog
 from tohgs.assets.sources import select_objects, task_set
 from tohgs.grasps.filter import SCREEN_KEYS
@@ -22,6 +23,7 @@ from tohgs.data.official import read_import
 from tohgs.methods import method_components
 from tohgs.models import CHECKED_KINDS
 from tohgs.models.guidance_settings import GuidanceSettings
+from tohgs.settings import merge, settings_from
 
 _SCHEMA = load_schema()
 try:
@@ -320,19 +322,10 @@ def component_settings(wildcards):
 _SETTING_KEYS = {kind: method_setting_keys(kind, _SCHEMA) for kind in {m["kind"] for m in METHODS.values()}}
 
 
-def _overlaid(base, overlay):
-    """``base`` with ``overlay``'s keys, sub-blocks merged key by key (a method's ``filter: {transform: icp}``
-    keeps the other filter settings)."""
-    out = dict(base)
-    for k, v in overlay.items():
-        out[k] = _overlaid(base[k], v) if isinstance(v, dict) and isinstance(base.get(k), dict) else v
-    return out
-
-
 def method_settings(wildcards):
     """The sampling settings of one method: the prediction block overlaid with the method's own, only those
     its kind reads (so a sampler setting leaves the dataset row's draw be)."""
-    settings = _overlaid(config["prediction"], METHODS[wildcards.method]["settings"])
+    settings = merge(copy.deepcopy(config["prediction"]), METHODS[wildcards.method]["settings"])
     keys = _SETTING_KEYS[METHODS[wildcards.method]["kind"]]
     if not settings_from(GuidanceSettings, settings.get("steer")).changes_sampling:
         settings.pop("steer", None)  # every lever off: the faithful sampler's settings, as before it existed
