@@ -23,8 +23,9 @@ def settings_from(cls: type[T], values: Mapping[str, Any] | None, *, complete: b
     Args:
         cls: the dataclass.
         values: its settings (None: none).
-        complete: every field must be given: a missing key is an error, not the dataclass's default (a job's
-            settings come from the validated config, where every key has its schema default).
+        complete: every field must be given (but a :func:`block` marked optional): a missing key is an error,
+            not the dataclass's default (a job's settings come from the validated config, where every key has
+            its schema default).
         where: what the settings are of, for the errors (default ``cls``'s name).
 
     Raises:
@@ -32,12 +33,13 @@ def settings_from(cls: type[T], values: Mapping[str, Any] | None, *, complete: b
             message names them.
     """
     values = dict(values or {})
-    names = [f.name for f in dataclasses.fields(cls)]
+    fields = dataclasses.fields(cls)
+    names = [f.name for f in fields]
     what = where or cls.__name__
     unknown = set(values) - set(names)
     if unknown:
         raise ValueError(f"{what}: unknown settings {sorted(unknown)} (its settings: {', '.join(names)})")
-    missing = [n for n in names if n not in values]
+    missing = [f.name for f in fields if f.name not in values and not f.metadata.get("optional")]
     if complete and missing:
         raise ValueError(f"{what}: settings {missing} missing (a job is given every setting its kind reads)")
     return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
@@ -57,3 +59,23 @@ def merge(dst: dict[str, Any], src: Mapping[str, Any], *, overwrite: bool = True
         elif overwrite or k not in dst:
             dst[k] = copy.deepcopy(v)
     return dst
+
+
+def block(cls: type, *, optional: bool = False) -> Any:
+    """A field of a settings dataclass that is a settings block of its own (a method kind's ``tta``,
+    ``filter``): its default is ``cls()``, and :func:`build_blocks` turns a mapping given for it into ``cls``.
+    ``optional``: :func:`settings_from` with ``complete`` lets it be missing (the block's defaults then)."""
+    return dataclasses.field(default_factory=cls, metadata={"block": cls, "optional": optional})
+
+
+def build_blocks(settings: Any) -> None:
+    """Turn, in place, each mapping a :func:`block` field of the frozen dataclass instance ``settings`` holds
+    into its dataclass (call it from ``__post_init__``).
+
+    Raises:
+        ValueError: a key the block's dataclass does not have (named with the block).
+    """
+    for f in dataclasses.fields(settings):
+        cls, value = f.metadata.get("block"), getattr(settings, f.name)
+        if cls is not None and not isinstance(value, cls):
+            object.__setattr__(settings, f.name, settings_from(cls, value, where=f"settings block {f.name!r}"))

@@ -12,29 +12,38 @@ at the end is recorded.
 from __future__ import annotations
 
 import time
-
-from dataclasses import fields
+from dataclasses import dataclass, fields
 
 import numpy as np
 import torch
 
 from tohgs.geometry.contact_parts import PartContact
 from tohgs.grasps.contactgen_solver import SolverSettings, solve_many
-from tohgs.methods.base import Method, Prediction, Request
-from tohgs.settings import settings_from
+from tohgs.methods.base import Method, Prediction, Request, SamplingSettings
+from tohgs.settings import block
+
+
+@dataclass(frozen=True)
+class ContactGenSettings(SamplingSettings):
+    """Every job's settings and ``contactgen``, the solver's
+    (:class:`tohgs.grasps.contactgen_solver.SolverSettings`)."""
+
+    contactgen: SolverSettings = block(SolverSettings)
 
 
 class ContactGenMethod(Method):
     """Sampled representations, then the solver (module docstring)."""
 
+    Settings = ContactGenSettings
+
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.require_hand("ContactGen's solver poses hands")
         self.generator = self.model("model")
-        if not getattr(getattr(self.generator, "cfg", None), "parts", False):
+        if not self.generator.samples_parts:
             raise ValueError(f"method {self.name!r}: its model {self.cfg['model']!r} samples no parts and directions "
                              "(a contact_gen component with parts: true)")
-        self.solver = settings_from(SolverSettings, self.settings.contactgen)
+        self.solver = self.settings.contactgen
 
     def predict(self, batch, shard, row, generator, rng) -> Prediction | None:
         return self.predict_many([Request(batch, shard, row, generator, rng)])[0]

@@ -104,7 +104,13 @@ class ContactGen(Component):
 
     kind = "contact_gen"
     Config = ContactGenConfig
+    role = "contact"
     needs_hand = True
+
+    @property
+    def samples_parts(self) -> bool:
+        """Whether it samples parts and directions besides the contact (``parts``)."""
+        return bool(self.cfg.parts)
 
     def __init__(self, cfg: ContactGenConfig):
         super().__init__()
@@ -123,7 +129,7 @@ class ContactGen(Component):
         """Before training: the hand (the part and direction targets pose it) and the shards' alpha."""
         if hand is None and self.cfg.parts:
             raise ValueError("ContactGen's part and direction targets need the hand model; pass hand=")
-        self.alpha_contact.fill_(float(data.shards[0].attrs.get("alpha_contact", 100.0)))
+        self.alpha_contact.fill_(data.shards[0].alpha_contact)
         self._training = {"hand": hand}
 
     def features(self, batch: Batch) -> tuple[torch.Tensor, torch.Tensor]:

@@ -77,6 +77,7 @@ class ContactNet(Component):
 
     kind = "contact_net"
     Config = ContactNetConfig
+    role = "hand_contact"
     needs_hand = True
 
     def __init__(self, cfg: ContactNetConfig):
@@ -97,7 +98,7 @@ class ContactNet(Component):
         """Before training: the hand (the loss poses it) and the shards' contact alpha."""
         if hand is None:
             raise ValueError("ContactNet trains with the hand model; pass hand=")
-        self.alpha_contact.fill_(float(data.shards[0].attrs.get("alpha_contact", 100.0)))
+        self.alpha_contact.fill_(data.shards[0].alpha_contact)
         self._training = {"hand": hand}
 
     def object_features(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -53,6 +53,7 @@ class PosePrior(Component):
 
     kind = "pose_prior"
     Config = PosePriorConfig
+    role = "pose_prior"
 
     def __init__(self, cfg: PosePriorConfig):
         super().__init__()

@@ -207,7 +207,7 @@ def train_component(component: str, kind: str, task: str, shard_paths: list[str 
     ema.copy_to(model.parameters())
     ckpt = save_checkpoint(out, model, component, task, network, asdict(s), loss_curve=curve, seconds=spent,
                            n_parameters=n_params, n_train_grasps=len(data),
-                           alpha_contact=float(data.shards[0].attrs.get("alpha_contact", 100.0)),
+                           alpha_contact=data.shards[0].alpha_contact,
                            hand_wrist=data.shards[0].attrs["hand_wrist"])
     resume.unlink(missing_ok=True)
     if curve_png is not None:
