@@ -3,8 +3,8 @@
 A method is a config block under ``methods`` (:file:`config/README.md`): a ``label`` (its row name in the
 tables), a ``kind`` and the kind's keys, which name components (``components.<name>``) or fixed sources
 (``ground_truth``). Kind ``k`` is the class ``METHOD`` of ``tohgs.methods.<k>``
-(:class:`tohgs.methods.base.Method`); one rule predicts any method (:func:`tohgs.methods.predict.predict`)
-into ``results/predictions/<task>/<method>.zarr``.
+(:class:`tohgs.methods.base.Method`; or of a module registered by :func:`register_method_kind`); one rule
+predicts any method (:func:`tohgs.methods.predict.predict`) into ``results/predictions/<task>/<method>.zarr``.
 
 This module is read at workflow parse time, so it imports neither torch nor the method modules.
 """
