@@ -35,9 +35,10 @@ import numpy as np
 from tohgs.assets.mesh import object_mesh
 from tohgs.assets.objects import prepare_object
 from tohgs.assets.sources import brick_candidates, pybullet_named_candidates, pybullet_random_candidates
-from tohgs.config import settings_from, validate_config
+from tohgs.config import validate_config
 from tohgs.geometry.grasp import pose_matrix
 from tohgs.metrics.quality import DisplacementSimulator, SDSettings, SDWorkers, sd_gravity
+from tohgs.settings import settings_from
 
 REPO = Path(__file__).resolve().parent.parent
 POSE = np.array([0.1, -0.2, 0.75, 0.0, 0.0, np.sin(0.4), np.cos(0.4)])  # the object's world pose

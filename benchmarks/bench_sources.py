@@ -37,11 +37,12 @@ import torch
 from tohgs.assets.mesh import object_mesh
 from tohgs.assets.objects import prepare_object
 from tohgs.assets.sources import ObjectSpec, pybullet_random_candidates, select_objects, ycb_candidates
-from tohgs.config import load_config, settings_from
+from tohgs.config import load_config
 from tohgs.grasps.filter import filter_prior_grasps
 from tohgs.grasps.prior import SDFSettings, make_prior_grasps, object_sdf
 from tohgs.hand import load_hand
 from tohgs.metrics.quality import DisplacementSimulator, SDSettings, sd_gravity
+from tohgs.settings import settings_from
 
 REPO = Path(__file__).resolve().parent.parent
 

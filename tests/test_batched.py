@@ -20,7 +20,7 @@ from tohgs.grasps.contactgen_solver import SolverSettings, representation_of, so
 from tohgs.grasps.flex import FlexSettings, optimise, optimise_many
 from tohgs.grasps.tta import TTASettings, adapt, adapt_many
 from tohgs.hand import load_hand
-from tohgs.methods.base import PredictSettings, Request
+from tohgs.methods.base import Request
 from tohgs.models.component import build_component
 
 N = 128  # object points
@@ -135,10 +135,11 @@ def test_icp_of_several_configurations_equals_each_alone():
 class _Shard:
     """What the methods read of a map shard: the objects vocabulary, ids, indices and centroids."""
 
-    attrs: dict = field(default_factory=lambda: {"objects": ["sphere", "box", "capsule"], "alpha_contact": 100.0})
+    attrs: dict = field(default_factory=lambda: {"objects": ["sphere", "box", "capsule"]})
     object_id: np.ndarray = field(default_factory=lambda: np.arange(3))
     config_index: np.ndarray = field(default_factory=lambda: np.array([4, 0, 7]))
     centroid: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    alpha_contact: float = 100.0
 
 
 def _requests(samples: int) -> list[Request]:
@@ -166,8 +167,8 @@ def _same(a, b) -> None:
 def _method(kind: str, cfg: dict, models: dict, settings: dict, hand, base=None):
     from tohgs.methods.predict import method_class
 
-    return method_class(kind)(kind, {"kind": kind, **cfg}, models, PredictSettings(**settings), torch.device("cpu"),
-                              hand, base)
+    cls = method_class(kind)
+    return cls(kind, {"kind": kind, **cfg}, models, cls.Settings(**settings), torch.device("cpu"), hand, base)
 
 
 @pytest.mark.parametrize("kind", ["grasp_tta", "contact_gen", "flex"])

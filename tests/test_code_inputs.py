@@ -3,6 +3,7 @@ no workflow run (moved out of tests/test_workflow.py, whose end-to-end runs are 
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -35,3 +36,23 @@ def test_the_code_inputs_are_derived_from_the_imports(tmp_path):
     assert {f.name for f in code_inputs(tmp_path / "s.py", (), tmp_path)} == {"__init__.py", "a.py", "b.py"}
     with pytest.raises(FileNotFoundError, match="no module"):
         code_inputs(tmp_path / "s.py", ("models/nothing",), tmp_path)
+
+
+#: The stages before training (their rule files): their jobs are the costliest to rerun.
+DATA_STAGES = ("hand", "objects", "scenes", "grasps", "dataset", "official")
+#: What a data job must not run: the config validator (the workflow's) and the method and component registries.
+NOT_DATA_CODE = {"tohgs/config.py", "tohgs/methods/__init__.py", "tohgs/models/__init__.py"}
+
+
+def test_the_data_stages_run_neither_the_validator_nor_a_registry():
+    """An edit of a schema check or of a registry leaves the data stages be: every script of their rules
+    reaches neither (the settings dataclasses are built by tohgs.settings, a leaf); nor does a prediction job
+    run the training loop (the device is picked beside the checkpoint loader)."""
+    scripts = sorted({s for stage in DATA_STAGES
+                      for s in re.findall(r'"\.\./scripts/(\w+\.py)"', (REPO / f"workflow/rules/{stage}.smk").read_text())})
+    assert {"prior_synthesis.py", "prior_filter.py", "scenes.py", "maps.py", "task_grasps.py"} <= set(scripts)
+    for script in scripts:
+        listed = {f.relative_to(REPO).as_posix() for f in code_inputs(REPO / "workflow/scripts" / script, (), REPO)}
+        assert not listed & NOT_DATA_CODE, f"{script} runs {sorted(listed & NOT_DATA_CODE)}"
+    predict = code_inputs(REPO / "workflow/scripts/predict.py", ("methods/grasp_tta", "models/grasp_cvae"), REPO)
+    assert not {"tohgs/models/train.py", "tohgs/config.py"} & {f.relative_to(REPO).as_posix() for f in predict}

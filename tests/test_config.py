@@ -9,7 +9,8 @@ import sys
 import pytest
 import yaml
 
-from tohgs.config import ConfigError, _deep_update, iter_schema_keys, load_schema, validate_config
+from tohgs.config import ConfigError, iter_schema_keys, load_schema, validate_config
+from tohgs.settings import merge
 
 
 def test_every_schema_key_has_description_and_default():
@@ -86,7 +87,7 @@ def test_defaults_are_filled_in_place():
 )
 def test_invalid_config_names_key_and_problem(default_config, patch, key, problem):
     cfg = copy.deepcopy(default_config)
-    _deep_update(cfg, patch)
+    merge(cfg, patch)
     with pytest.raises(ConfigError) as exc:
         validate_config(cfg)
     msg = str(exc.value)
@@ -127,7 +128,9 @@ def test_the_settings_dataclasses_default_to_the_schema():
     """One source of truth: a library default that differs from the schema's is a test failure."""
     import dataclasses
 
-    from tohgs.methods.base import PredictSettings
+    from tohgs.methods.base import SamplingSettings
+    from tohgs.methods.contact_grasp import ContactGraspSettings
+    from tohgs.methods.grasp_tta import GraspTTASettings
     from tohgs.models.contact_diffuser import ContactDiffuserConfig
     from tohgs.models.grasp_diffuser import GraspDiffuserConfig
     from tohgs.geometry.registration import ICPSettings
@@ -152,7 +155,7 @@ def test_the_settings_dataclasses_default_to_the_schema():
 
         _fill_defaults(networks[kind], schema["$defs"]["networks"][kind])
     pred = cfg["prediction"]
-    pairs = [(TrainSettings, cfg["training"]), (PredictSettings, pred), (TTASettings, pred["tta"]),
+    pairs = [(TrainSettings, cfg["training"]), (SamplingSettings, pred), (ContactGraspSettings, pred), (GraspTTASettings, pred), (TTASettings, pred["tta"]),
              (FilterSettings, pred["filter"]), (ICPSettings, pred["filter"]["icp"]),
              (ContactDiffuserConfig, networks["contact_diffuser"]), (GraspDiffuserConfig, networks["grasp_diffuser"]),
              (GraspCVAEConfig, networks["grasp_cvae"]), (ContactNetConfig, networks["contact_net"]),
@@ -163,8 +166,8 @@ def test_the_settings_dataclasses_default_to_the_schema():
         for f in dataclasses.fields(cls):
             value = getattr(cls(), f.name)
             assert f.name in block, f"{cls.__name__}.{f.name} is not in the schema"
-            if isinstance(block[f.name], dict) and value in ({}, None):
-                continue  # a sub-block: its own dataclass is compared above
+            if isinstance(block[f.name], dict) and (value in ({}, None) or dataclasses.is_dataclass(value)):
+                continue  # a sub-block: its own dataclass is compared in its own pair
             expect = block[f.name]
             norm = (lambda v: [norm(x) for x in v] if isinstance(v, (list, tuple)) else v)  # noqa: E731
             assert norm(value) == norm(expect), f"{cls.__name__}.{f.name}: {value!r} != schema {expect!r}"
@@ -214,7 +217,7 @@ def test_the_upright_overlay_adds_an_upright_row_and_leaves_the_faithful_one_in_
     with open(repo / "config/config.yaml") as fh:
         cfg = yaml.safe_load(fh)
     with open(repo / "config/upright.yaml") as fh:
-        _deep_update(cfg, yaml.safe_load(fh))
+        merge(cfg, yaml.safe_load(fh))
     cfg = validate_config(cfg, base_dir=repo)
     comps, methods = cfg["components"], cfg["methods"]
     assert cfg["training"]["rotation"] == "so3"

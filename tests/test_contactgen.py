@@ -123,7 +123,7 @@ def test_the_solver_brings_a_perturbed_hand_back_to_its_representation(built):  
     tmp, hand, _, _, _ = built
     data = MapDataset([tmp / "shard-0.zarr"], per="grasp")
     batch = Batch.collate([data.item(i, 0) for i in range(len(data))])
-    alpha = float(data.shards[0].attrs.get("alpha_contact", 100.0))
+    alpha = data.shards[0].alpha_contact
     target = representation_of(hand, batch.grasp, batch.points, alpha)
     start = perturb_grasps(batch.grasp, (0.015, 0.15, 0.15), torch.Generator().manual_seed(3))
     settings = SolverSettings(global_steps=40, pose_steps=120)
@@ -180,14 +180,16 @@ def test_the_ground_truth_gate_solves_the_representation_of_the_datasets_own_gra
     Dataset row evaluates (ground_truth_pick), solved from the default start; the hands come back near those
     grasps (closer than the start), and a configuration without task grasps is not predicted."""
     from tohgs.data.maps import read_map_shard
-    from tohgs.methods.base import PredictSettings, Request, ground_truth_pick
-    from tohgs.methods.contact_gen import ContactGenMethod
+    from tohgs.methods.base import Request, ground_truth_pick
+    from tohgs.methods.contact_gen import ContactGenMethod, ContactGenSettings
+    from tohgs.settings import settings_from
 
     tmp, hand, _, _, _ = built
     shard = read_map_shard(tmp / "shard-0.zarr")
     data = MapDataset([tmp / "shard-0.zarr"], per="config")
     cpu = torch.device("cpu")
-    s = PredictSettings(samples=3, seed=1, device="cpu", contactgen={"global_steps": 40, "pose_steps": 100})
+    s = settings_from(ContactGenSettings, {"samples": 3, "seed": 1, "device": "cpu",
+                                            "contactgen": {"global_steps": 40, "pose_steps": 100}})
     gate = ContactGenMethod("contactgen-gt", {"kind": "contact_gen", "model": "ground_truth"}, {}, s, cpu, hand)
     requests = [Request(Batch.collate([data[row]], cpu).repeat(3), shard, row, torch.Generator().manual_seed(0),
                         np.random.default_rng(0)) for row in range(shard.n_configs)]
@@ -203,7 +205,7 @@ def test_the_ground_truth_gate_solves_the_representation_of_the_datasets_own_gra
             err_start = (hand(start).vertices - v_true).norm(dim=-1).mean()
         assert float(err) < 0.3 * float(err_start), (row, float(err), float(err_start))
         np.testing.assert_allclose(pred.contact, representation_of(
-            hand, truth, requests[row].batch.points, float(shard.attrs["alpha_contact"])).contact.numpy(), atol=1e-6)
+            hand, truth, requests[row].batch.points, shard.alpha_contact).contact.numpy(), atol=1e-6)
     # no task grasps: no prediction (the tables count the configuration as missing)
     empty = type(shard)({**shard.arrays, "grasp_config": np.full_like(shard.grasp_config, -1)}, shard.attrs)
     assert gate.predict_many([Request(requests[0].batch, empty, 0, requests[0].generator, requests[0].rng)]) == [None]

@@ -218,7 +218,7 @@ def test_ground_truth_rows_read_the_same_grasps_of_every_configuration(built):  
 
     from tohgs.data.batch import Batch
     from tohgs.data.maps import MapDataset, read_map_shard
-    from tohgs.methods.base import PredictSettings, ground_truth_pick, gt_rows
+    from tohgs.methods.base import ground_truth_pick, gt_rows
     from tohgs.methods.contact_grasp import ContactGrasp
     from tohgs.methods.reference import Reference
 
@@ -226,10 +226,9 @@ def test_ground_truth_rows_read_the_same_grasps_of_every_configuration(built):  
     shard = read_map_shard(tmp / "shard-0.zarr")
     data = MapDataset([tmp / "shard-0.zarr"], per="config")
     cpu = torch.device("cpu")
-    s = PredictSettings(samples=5, seed=3, device="cpu")
-    ref = Reference("dataset", {"kind": "reference"}, {}, s, cpu)
+    ref = Reference("dataset", {"kind": "reference"}, {}, Reference.Settings(samples=5, seed=3, device="cpu"), cpu)
     gt = ContactGrasp("ours-gt-contact", {"kind": "contact_grasp", "contact": "ground_truth", "grasp": "g"},
-                      {"g": torch.nn.Identity()}, s, cpu)
+                      {"g": torch.nn.Identity()}, ContactGrasp.Settings(samples=5, seed=3, device="cpu"), cpu)
     reordered = 0
     for row in range(shard.n_configs):
         batch = Batch.collate([data[row]], cpu).repeat(5)
@@ -241,7 +240,7 @@ def test_ground_truth_rows_read_the_same_grasps_of_every_configuration(built):  
             pred = ref.predict(batch, shard, row, gen, rng)
             np.testing.assert_array_equal(pred.grasp, shard.grasp[ids].astype(np.float64))
             np.testing.assert_array_equal(pred.contact, shard.contact[ids])
-            np.testing.assert_array_equal(gt._contact(batch, shard, row, gen).numpy(), shard.contact[ids])
+            np.testing.assert_array_equal(gt.source.maps(batch, shard, row, gen).numpy(), shard.contact[ids])
         reordered += int(not np.array_equal(ground_truth_pick(shard, row, 5, 4), ids))
     assert reordered > 0  # another seed draws another order
 

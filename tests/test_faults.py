@@ -31,7 +31,8 @@ from tohgs.data.scenes import SceneSet, read_scenes, write_scenes
 from tohgs.data.task_grasps import read_task_grasps, write_task_grasps
 from tohgs.io import atomic_dir, atomic_path
 from tohgs.models.checkpoint import load_checkpoint, load_component
-from tohgs.models.train import pick_device, train_component
+from tohgs.models.checkpoint import pick_device
+from tohgs.models.train import train_component
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -11,7 +11,7 @@ import torch
 from tohgs.data.batch import Batch
 from tohgs.hand import load_hand
 from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, sample
-from tohgs.models.guidance import (GraspEnergy, GuidanceSettings, contact_guidance_step, guidance_step,
+from tohgs.models.guidance import (GuidanceEnergy, GuidanceSettings, contact_guidance_step, guidance_step,
                                     near_scene_weights, select_diverse)
 
 
@@ -89,7 +89,7 @@ def test_every_term_and_its_gradient_equal_a_slow_reference(hand):
     goal[:, 2, 3] = -0.01  # carried down: deeper at the goal
     contact = torch.as_tensor(rng.uniform(0, 1, (b, 60)))
     s = GuidanceSettings(scale=1.0, w_scene=1.0, w_object=2.0, w_contact=0.5, w_joints=3.0, hand_points=40)
-    e = GraspEnergy(hand, obj.expand(b, -1, -1), obj_n.expand(b, -1, -1), table.expand(b, -1, -1),
+    e = GuidanceEnergy(hand, obj.expand(b, -1, -1), obj_n.expand(b, -1, -1), table.expand(b, -1, -1),
                     table_n.expand(b, -1, -1), goal, contact, s)
     x = grasp.clone().requires_grad_(True)
     terms = e.terms(x)
@@ -189,7 +189,7 @@ def test_guided_sampling_takes_a_hand_out_of_the_table_at_both_poses(hand):
         return float((v[..., 2] < z0).double().mean()), float((carried[..., 2] < z0 + 0.03).double().mean())
 
     s = GuidanceSettings(scale=0.1, start=0.5, w_scene=1.0, w_object=0.0, margin=0.003, max_depth=0.15)
-    energy = GraspEnergy(hand, torch.zeros(b, 1, 3, dtype=torch.float64), torch.ones(b, 1, 3, dtype=torch.float64),
+    energy = GuidanceEnergy(hand, torch.zeros(b, 1, 3, dtype=torch.float64), torch.ones(b, 1, 3, dtype=torch.float64),
                          scene.expand(b, -1, -1), scene_n.expand(b, -1, -1), goal.expand(b, -1, -1), None, s)
 
     def run(steer: GuidanceSettings) -> torch.Tensor:
@@ -312,8 +312,7 @@ def test_contact_grasp_samples_candidates_and_keeps_s_of_lower_energy(hand):
     from types import SimpleNamespace
 
     from helpers import SMALL_PN
-    from tohgs.methods.base import PredictSettings
-    from tohgs.methods.contact_grasp import ContactGrasp
+    from tohgs.methods.contact_grasp import ContactGrasp, ContactGraspSettings
     from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
     from tohgs.models.grasp_diffuser import GraspDiffuser, GraspDiffuserConfig
 
@@ -324,15 +323,15 @@ def test_contact_grasp_samples_candidates_and_keeps_s_of_lower_energy(hand):
     contact = ContactDiffuser(ContactDiffuserConfig(d_model=16, n_blocks=1, pointnet=SMALL_PN)).eval()
     models = {"cd": contact, "gd": grasp}
     cfg = {"contact": "cd", "grasp": "gd"}
-    shard = SimpleNamespace(attrs={"alpha_contact": 100.0, "alpha_distance": 30.0})
+    shard = SimpleNamespace(alpha_contact=100.0, alpha_distance=30.0)
     batch = _batch(1, torch.Generator().manual_seed(1)).repeat(4)
     steer = {"candidates": 3, "pool": 0.5, "w_scene": 1.0, "w_object": 1.0, "hand_points": 100}
-    method = ContactGrasp("g", cfg, models, PredictSettings(samples=4, steps=5, steer=steer), torch.device("cpu"), hand32)
+    method = ContactGrasp("g", cfg, models, ContactGraspSettings(samples=4, steps=5, steer=steer), torch.device("cpu"), hand32)
     pred = method.predict(batch, shard, 0, torch.Generator().manual_seed(0), np.random.default_rng(0))
     assert pred.grasp.shape == (4, 51) and pred.contact.shape == (4, 64) and "select" in pred.seconds
     assert pred.info["energy_kept"] <= pred.info["energy_candidates"]
     with pytest.raises(ValueError, match="hand model"):
-        ContactGrasp("g", cfg, models, PredictSettings(steer=steer), torch.device("cpu"), None)
+        ContactGrasp("g", cfg, models, ContactGraspSettings(steer=steer), torch.device("cpu"), None)
     with pytest.raises(ValueError, match="contact_scale"):
         ContactGrasp("g", {"contact": "ground_truth", "grasp": "gd"}, models,
-                     PredictSettings(steer={"contact_scale": 1.0}), torch.device("cpu"), hand32)
+                     ContactGraspSettings(steer={"contact_scale": 1.0}), torch.device("cpu"), hand32)

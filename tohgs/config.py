@@ -18,8 +18,9 @@ from typing import Any
 import jsonschema
 import yaml
 
-from tohgs.methods import NOT_COMPONENT_KEYS, method_components, method_kind_exists
+from tohgs.methods import NOT_COMPONENT_KEYS, SAMPLING_KEYS, method_components, method_kind_exists, of_chain
 from tohgs.models import component_kind_exists
+from tohgs.settings import merge
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SCHEMA_PATH = REPO_ROOT / "workflow" / "schemas" / "config.schema.yaml"
@@ -44,9 +45,36 @@ REPLICA_SUFFIX = re.compile(r"-seed[0-9]+$")
 
 
 def load_schema(path: Path | str = SCHEMA_PATH) -> dict[str, Any]:
-    """Read the YAML JSON-schema of the workflow configuration."""
+    """Read the YAML JSON-schema of the workflow configuration, with the method kinds' settings blocks in the
+    ``prediction`` block (:func:`with_method_blocks`)."""
     with open(path) as fh:
-        return yaml.safe_load(fh)
+        return with_method_blocks(yaml.safe_load(fh))
+
+
+def with_method_blocks(schema: dict[str, Any]) -> dict[str, Any]:
+    """Put, in place, each method kind's settings blocks (``$defs.method_kinds.<kind>.blocks.<name>``: the kind
+    owns them) into the ``prediction`` block's properties as ``prediction.<name>``, and return ``schema``.
+    Idempotent: a kind added to the schema later (a test's) is put in by calling it again.
+
+    Raises:
+        ConfigError: a block that two kinds own, or one of the ``prediction`` block's own keys; a kind that
+            reads a setting the ``prediction`` block does not have.
+    """
+    props = schema["properties"]["prediction"]["properties"]
+    owner = schema["properties"]["prediction"].setdefault("x-block-owners", {})
+    for kind, spec in schema.get("$defs", {}).get("method_kinds", {}).items():
+        for name, block in spec.get("blocks", {}).items():
+            if name in props and owner.get(name) != kind:
+                other = f"method kind {owner[name]!r}'s block" if name in owner else "a key of the prediction block"
+                raise ConfigError(f"schema $defs.method_kinds.{kind}.blocks.{name}: prediction.{name} is already {other}")
+            props[name], owner[name] = block, kind
+    for kind, spec in schema.get("$defs", {}).get("method_kinds", {}).items():
+        unknown = [k for k in spec.get("settings", []) if k not in props or k in SAMPLING_KEYS]
+        if unknown:
+            raise ConfigError(f"schema $defs.method_kinds.{kind}.settings: {unknown[0]!r} is not a prediction setting of "
+                              f"a kind (the prediction block's: {', '.join(k for k in props if k not in SAMPLING_KEYS)}; "
+                              f"every job reads {', '.join(SAMPLING_KEYS)})")
+    return schema
 
 
 def _key_path(parts: Any) -> str:
@@ -64,7 +92,7 @@ def _fill_defaults(instance: Any, schema: Mapping[str, Any]) -> None:
         if key not in instance and "default" in sub:
             instance[key] = copy.deepcopy(sub["default"])
         elif key in instance and sub.get("x-merge-default") and isinstance(instance[key], dict):
-            _merge_missing(instance[key], sub.get("default", {}))
+            merge(instance[key], sub.get("default", {}), overwrite=False)
         if key in instance:
             _fill_defaults(instance[key], sub)
     entries = schema.get("additionalProperties")
@@ -72,15 +100,6 @@ def _fill_defaults(instance: Any, schema: Mapping[str, Any]) -> None:
         for key, value in instance.items():
             if key not in schema.get("properties", {}):
                 _fill_defaults(value, entries)
-
-
-def _merge_missing(dst: dict[str, Any], src: Mapping[str, Any]) -> None:
-    """Add ``src``'s keys that ``dst`` lacks, recursively into mappings both have (``dst`` wins)."""
-    for k, v in src.items():
-        if k not in dst:
-            dst[k] = copy.deepcopy(v)
-        elif isinstance(dst[k], dict) and isinstance(v, Mapping):
-            _merge_missing(dst[k], v)
 
 
 def _error_message(err: jsonschema.ValidationError) -> str:
@@ -228,10 +247,21 @@ def _overlay_schema(block: Mapping[str, Any]) -> dict[str, Any]:
     return {"type": "object", "additionalProperties": False, "properties": block["properties"]}
 
 
-def method_setting_keys(kind: str, schema: Mapping[str, Any] | None = None) -> list[str] | None:
-    """The prediction settings a method kind reads (None: all of them), from the schema's method_kinds."""
+def method_setting_keys(kind: str, schema: Mapping[str, Any] | None = None) -> list[str]:
+    """The prediction settings a job of method kind ``kind`` reads: those every job reads
+    (:data:`tohgs.methods.SAMPLING_KEYS`), then the kind's own (the schema's ``$defs.method_kinds.<kind>.settings``;
+    its ``METHOD.Settings`` has exactly these fields)."""
     schema = load_schema() if schema is None else schema
-    return schema.get("$defs", {}).get("method_kinds", {}).get(kind, {}).get("settings")
+    return [*SAMPLING_KEYS, *schema["$defs"]["method_kinds"][kind].get("settings", [])]
+
+
+def job_settings(cfg: Mapping[str, Any], name: str, schema: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The prediction settings a job of method ``name`` (a validated config's) is given: the ``prediction``
+    block overlaid with the method's ``settings`` (sub-blocks key by key), only those its kind reads
+    (:func:`method_setting_keys`), every one of them."""
+    method = cfg["methods"][name]
+    settings = merge(copy.deepcopy(dict(cfg["prediction"])), method["settings"])
+    return {k: settings[k] for k in method_setting_keys(method["kind"], schema)}
 
 
 def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -> None:
@@ -262,6 +292,11 @@ def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -
         if kind not in method_kinds or not method_kind_exists(kind):
             raise ConfigError(f"config key '{where}.kind': unknown method kind {kind!r} (known: {', '.join(sorted(method_kinds))})")
         _validate_part(method["settings"], _overlay_schema(props["prediction"]), f"{where}.settings")
+        reads = method_setting_keys(kind, schema)
+        unread = [k for k in method["settings"] if k not in reads]
+        if unread:
+            raise ConfigError(f"config key '{where}.settings.{unread[0]}': a {kind} method does not read it (its "
+                              f"settings: {', '.join(reads)})")
         keys = method_kinds[kind].get("keys", {})
         for key, spec in keys.items():
             if key not in method:
@@ -286,12 +321,10 @@ def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -
             raise ConfigError(f"config key '{where}.{sorted(extra)[0]}': not a key of a {kind} method "
                               f"(its keys: label, kind, settings{''.join(', ' + k for k in keys)})")
     for name in cfg["methods"]:  # a method of a method of ... itself cannot be predicted
-        seen, m = [name], name
-        while (base := cfg["methods"][m].get("of")) is not None:
-            if base in seen:
-                raise ConfigError(f"config key 'methods.{name}.of': a cycle of methods ({' -> '.join([*seen, base])})")
-            seen.append(base)
-            m = base
+        try:
+            of_chain(name, cfg["methods"])
+        except ValueError as err:
+            raise ConfigError(f"config key 'methods.{name}.of': {err}") from None
     if "claims" in cfg["tables"]:
         raise ConfigError("config key 'tables.claims': the name is the claims table's (results/tables/claims.csv); "
                           "name the table otherwise")
@@ -371,7 +404,7 @@ def validate_config(cfg: dict[str, Any], schema: Mapping[str, Any] | None = None
     Raises:
         ConfigError: the first problem found, naming the key (e.g. ``objects.size.longest_min``).
     """
-    schema = load_schema() if schema is None else schema
+    schema = load_schema() if schema is None else with_method_blocks(schema)
     base = Path.cwd() if base_dir is None else Path(base_dir)
     if not isinstance(cfg, dict):
         raise ConfigError(f"config: expected a mapping at the top level, got {type(cfg).__name__}")
@@ -411,10 +444,7 @@ def add_seed_replicas(cfg: dict[str, Any], methods: list[str] | None = None) -> 
     names = list(meths) if methods is None else list(methods)
     closure: list[str] = []
     for m in names:  # the methods with those they are of (kind filtered)
-        chain = [m]
-        while "of" in meths[chain[-1]]:
-            chain.append(meths[chain[-1]]["of"])
-        closure += [c for c in reversed(chain) if c not in closure]
+        closure += [c for c in reversed(of_chain(m, meths)) if c not in closure]
     used = list(dict.fromkeys(c for m in closure for c in method_components(meths[m], comps)))
     base_comps = {c: copy.deepcopy(comps[c]) for c in used}
     base_meths = {m: copy.deepcopy(meths[m]) for m in closure}
@@ -446,28 +476,8 @@ def load_config(path: Path | str, overrides: Mapping[str, Any] | None = None) ->
     with open(path) as fh:
         cfg = yaml.safe_load(fh) or {}
     if overrides:
-        _deep_update(cfg, overrides)
+        merge(cfg, overrides)
     return validate_config(cfg)
-
-
-def _deep_update(dst: dict[str, Any], src: Mapping[str, Any]) -> None:
-    for k, v in src.items():
-        if isinstance(v, Mapping) and isinstance(dst.get(k), dict):
-            _deep_update(dst[k], v)
-        else:
-            dst[k] = copy.deepcopy(v)
-
-
-def settings_from(cls, values: Mapping[str, Any] | None):
-    """An instance of the frozen settings dataclass ``cls`` from a config mapping: YAML lists become
-    tuples; a key ``cls`` does not have raises ``ValueError`` naming it."""
-    import dataclasses
-
-    values = dict(values or {})
-    unknown = set(values) - {f.name for f in dataclasses.fields(cls)}
-    if unknown:
-        raise ValueError(f"{cls.__name__}: unknown settings {sorted(unknown)}")
-    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
 
 
 def drop_ground_truth_rows(cfg: dict[str, Any], reason: str) -> list[str]:

@@ -368,7 +368,7 @@ def summarize_dataset(task_grasp_stores: list[str | Path], shards: list[str | Pa
         df.to_csv(tmp, index=False)
     # Paper scale, uncompressed: every task grasp with a 2048-point contact map and its grasp vector, and
     # per configuration the clouds and distance maps (about 1.38 M grasps; configurations ~ grasps / 30).
-    raw_grasp = (paper_points + 51) * 4 + 8
+    raw_grasp = (paper_points + GRASP_DIM) * 4 + 8
     raw_config = (7 * paper_points + 3 * paper_scene_points) * 4 + 19 * 8 + 8
     est = PAPER_TASK_GRASPS * raw_grasp + PAPER_TASK_GRASPS / 30 * raw_config
     total_bytes = int(df[df.split != "task_grasps"].bytes.sum())

@@ -73,6 +73,32 @@ class MapShard:
 
     arrays: dict[str, np.ndarray]
     attrs: dict[str, Any] = field(default_factory=dict)
+    source: str = "map shard"  # where it was read from, for the errors
+
+    @property
+    def alpha_contact(self) -> float:
+        """The alpha (1/m) of the shard's contact maps (its ``alpha_contact`` attribute): what a method or a
+        component compares its own hands' maps with.
+
+        Raises:
+            ValueError: the shard does not record it (named).
+        """
+        return float(self._attr("alpha_contact"))
+
+    @property
+    def alpha_distance(self) -> float:
+        """The alpha (1/m) of the shard's distance maps (its ``alpha_distance`` attribute).
+
+        Raises:
+            ValueError: the shard does not record it (named).
+        """
+        return float(self._attr("alpha_distance"))
+
+    def _attr(self, key: str) -> Any:
+        if key not in self.attrs:
+            raise ValueError(f"{self.source}: the attribute '{key}' is missing (a map shard written by "
+                             "tohgs.data.build_maps records it); rebuild the shard")
+        return self.attrs[key]
 
     @property
     def n_configs(self) -> int:
@@ -130,7 +156,7 @@ def read_map_shard(path: str | Path) -> MapShard:
             (the message names the shard and the problem).
     """
     arrays, attrs = read_store(path, SCHEMA, SCHEMA_VERSION, list(ARRAYS), "map shard")
-    shard = MapShard(arrays, attrs)
+    shard = MapShard(arrays, attrs, str(path))
     shard.validate(str(path))
     return shard
 

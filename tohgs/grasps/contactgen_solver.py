@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import torch
 
 from tohgs.geometry.contact_parts import N_PARTS, PartContact, part_contact
+from tohgs.geometry.grasp import GRASP_DIM
 from tohgs.geometry.hand_object import distance_to_vertices, nearest_index, vertex_normals
 from tohgs.geometry.surface_distance import closest_faces, corner_normals, distance_to_faces, vertex_rings
 from tohgs.grasps.tta import clamp_to_limits, pose_problems, problem_histories
@@ -103,7 +104,7 @@ def nearest_part_vertex(points: torch.Tensor, part: torch.Tensor, vertices: torc
 def default_start(hand: HandModel, batch: int) -> torch.Tensor:
     """(B, 51) the start grasps (module docstring): prior-mean fingers, no rotation, the palm's contact
     vertices centred on the origin (the object's centroid in the network frame)."""
-    g = torch.zeros(1, 51, dtype=hand.rest_vertices.dtype, device=hand.rest_vertices.device)
+    g = torch.zeros(1, GRASP_DIM, dtype=hand.rest_vertices.dtype, device=hand.rest_vertices.device)
     g[0, 6:] = torch.as_tensor(hand.assets.prior_mean, dtype=g.dtype, device=g.device)
     with torch.no_grad():
         palm = hand(g).vertices[0, hand.contact_ids].mean(0)

@@ -134,7 +134,7 @@ def filter_prior_grasps(raw: str | Path, thresholds: dict[str, Any], out: str | 
     Returns:
         the filtered :class:`~tohgs.data.grasps.PriorGrasps`.
     """
-    from tohgs.config import settings_from
+    from tohgs.settings import settings_from
     from tohgs.data.grasps import read_prior_grasps, write_prior_grasps
 
     g = read_prior_grasps(raw, filtered=False)

@@ -26,7 +26,6 @@ import torch
 import trimesh
 
 from tohgs.assets.mesh import OBJECT_MESH, object_mesh
-from tohgs.config import settings_from
 from tohgs.data.grasps import ENERGY_TERMS, PriorGrasps, write_prior_grasps
 from tohgs.geometry.sdf import SDFGrid
 from tohgs.grasps.filter import (SCREEN_KEYS, FilterThresholds, filter_prior_grasps,  # noqa: F401  (re-exported: the stage's other steps)
@@ -36,6 +35,7 @@ from tohgs.hand.model import HandModel
 from tohgs.cache import load_or_compute
 from tohgs.io import content_key
 from tohgs.runtime import keep_freed_memory
+from tohgs.settings import settings_from
 from tohgs.metrics.quality import (DisplacementSimulator, SDSettings, contact_distance, hand_quality, penetration_volume,
                                    surface_voxels)
 

@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from tohgs.hand.layout import N_BETAS, N_JOINTS, PARENTS, POSE_DIM
+from tohgs.geometry.grasp import GRASP_DIM
+from tohgs.hand.layout import N_BETAS, N_JOINTS, PARENTS
 
 #: Contact candidates on the palm: the last ones of ``contact_ids`` (see :mod:`tohgs.hand.derived`).
 PALM_CONTACTS = 8
@@ -126,8 +127,8 @@ class HandAssets:
         """:meth:`joint_frames` before the grasp's translation (which :meth:`vertices` adds last, so that its
         vertices are the same numbers whether or not the frames are asked for)."""
         pose = np.asarray(pose, dtype=np.float64)
-        if pose.ndim != 2 or pose.shape[1] != POSE_DIM:
-            raise ValueError(f"pose must have shape (B, {POSE_DIM}), got {pose.shape}")
+        if pose.ndim != 2 or pose.shape[1] != GRASP_DIM:
+            raise ValueError(f"pose must have shape (B, {GRASP_DIM}), got {pose.shape}")
         b = len(pose)
         rot = rotvec_to_matrix(pose[:, 3:].reshape(b, N_JOINTS, 3))  # (B, 16, 3, 3)
         j = np.asarray(self.rest_joints, dtype=np.float64)

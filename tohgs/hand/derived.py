@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
+from tohgs.geometry.grasp import GRASP_DIM
 from tohgs.hand.layout import FINGERS, N_JOINTS, PARENTS, TIP_ORDER, children
 from tohgs.hand.assets import PALM_CONTACTS, HandAssets
 
@@ -127,7 +128,7 @@ def preset_pose(frames: np.ndarray, flexion_deg: dict[str, tuple[float, float, f
                 thumb_abduction_deg: float = 0.0) -> np.ndarray:
     """(51,) pose vector: zero translation and global rotation, flexion angles about each joint's axis,
     and the thumb's first joint abducted toward the fingers by ``thumb_abduction_deg`` (opposition)."""
-    pose = np.zeros(51)
+    pose = np.zeros(GRASP_DIM)
     for finger, ks in FINGERS.items():
         for level, k in enumerate(ks):
             pose[3 + 3 * k: 6 + 3 * k] = np.deg2rad(flexion_deg[finger][level]) * frames[k - 1][:, 0]

@@ -19,7 +19,6 @@ JOINT_NAMES = (
 )
 PARENTS = (-1, 0, 1, 2, 0, 4, 5, 0, 7, 8, 0, 10, 11, 0, 13, 14)
 N_JOINTS = 16
-POSE_DIM = 51
 N_BETAS = 10
 
 #: Fingers in MANO joint order, each with its 3 joint indices.

@@ -19,9 +19,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from tohgs.geometry.grasp import GRASP_DIM
 from tohgs.hand.assets import LEVELS as _LEVELS
 from tohgs.hand.assets import HandAssets
-from tohgs.hand.layout import N_BETAS, N_JOINTS, PARENTS, POSE_DIM
+from tohgs.hand.layout import N_BETAS, N_JOINTS, PARENTS
 from tohgs.hand.rotations import axis_angle_to_matrix
 
 __all__ = ["HandAssets", "HandModel", "HandOutput"]
@@ -115,7 +116,7 @@ class HandModel(torch.nn.Module):
         if name not in self.assets.presets:
             raise KeyError(f"unknown pose preset '{name}'; known: {sorted(self.assets.presets)}")
         p = torch.as_tensor(self.assets.presets[name], dtype=self.rest_vertices.dtype, device=self.rest_vertices.device)
-        return p.expand(batch, POSE_DIM).clone()
+        return p.expand(batch, GRASP_DIM).clone()
 
     def shaped(self, betas: torch.Tensor | None, batch: int) -> tuple[torch.Tensor, torch.Tensor]:
         """Rest vertices (B, V, 3) and joints (B, 16, 3) for ``betas`` (B, 10) (``None`` = zeros)."""
@@ -138,8 +139,8 @@ class HandModel(torch.nn.Module):
         """The shaped rest vertices (B, V, 3) (with pose blend shapes), the joints' global rotations
         (B, 16, 3, 3) and positions (B, 16, 3) (without the translation), and the skinning transforms
         ``[R | P - R J_rest]`` (B, 16, 3, 4) of (B, 51) poses; metres."""
-        if pose.ndim != 2 or pose.shape[1] != POSE_DIM:
-            raise ValueError(f"pose must have shape (B, {POSE_DIM}), got {tuple(pose.shape)}")
+        if pose.ndim != 2 or pose.shape[1] != GRASP_DIM:
+            raise ValueError(f"pose must have shape (B, {GRASP_DIM}), got {tuple(pose.shape)}")
         pose = pose.to(self.rest_vertices.dtype)
         b = pose.shape[0]
         v_rest, j_rest = self.shaped(betas, b)

@@ -1,49 +1,54 @@
-"""The interface of a method kind, and the sampling settings every method shares."""
+"""The interface of a method kind, the settings every prediction job reads, and a method's contact source."""
 
 from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
 
 from tohgs.data.batch import Batch
 from tohgs.data.maps import MapShard
+from tohgs.methods import GROUND_TRUTH, NO_CONTACT
+from tohgs.settings import build_blocks
 
 
 @dataclass(frozen=True)
-class PredictSettings:
-    """``samples`` S per configuration (the paper's 16); sampler ``ddpm`` (all T steps) or ``ddim`` with
-    ``steps`` steps; ``seed``; ``device``; GraspDiffuser's classifier-free ``guidance`` scale;
-    ``contact_smoothing``, the neighbours over which ContactDiffuser's maps are averaged (0: none); ``tta``,
-    ``filter``, ``contactgen`` and ``flex``: GraspTTA's adaptation, F-GraspTTA's filter, ContactGen's solver
-    and FLEX's optimisation (:mod:`tohgs.methods.grasp_tta`, :mod:`tohgs.methods.filtered`,
-    :mod:`tohgs.methods.contact_gen`, :mod:`tohgs.methods.flex`); ``steer``, scene-aware guidance of
-    GraspDiffuser's sampling (:mod:`tohgs.models.guidance`; beyond the paper, off by default); ``chunk``,
-    the test configurations an optimising method solves as one batch of (configurations x samples) hands
-    (:meth:`Method.predict_many`; 1: one at a time, the same grasps either way). A method's ``settings``
-    block overlays the config's ``prediction`` block (the two sub-blocks key by key)."""
+class SamplingSettings:
+    """The settings every prediction job reads (:func:`tohgs.methods.predict.predict`): ``samples`` S per
+    configuration (the paper's 16), the ``seed``, torch ``threads``, the ``device`` and ``chunk``, the test
+    configurations asked of the method at once (:meth:`Method.predict_many`; the same grasps either way).
+
+    A method kind's ``Settings`` (:attr:`Method.Settings`) is this class or a subclass with the keys the kind
+    reads besides, among them the settings blocks it owns (:func:`tohgs.settings.block`); the schema's
+    ``$defs.method_kinds.<kind>.settings`` lists the same keys (a test keeps the two equal), and a job is
+    given exactly those: the config's ``prediction`` block overlaid with the method's ``settings``."""
 
     samples: int = 16
-    sampler: str = "ddim"
-    steps: int = 20
     seed: int = 0
     threads: int = 1
     device: str = "auto"
-    guidance: float = 1.0  # GraspDiffuser's classifier-free guidance scale (1: none; needs cond_dropout)
-    contact_smoothing: int = 0  # k of smooth_contact for a contact component's maps (0 or 1: none)
-    tta: dict = field(default_factory=dict)  # tohgs.grasps.tta.TTASettings
-    filter: dict = field(default_factory=dict)  # tohgs.methods.filtered.FilterSettings
-    contactgen: dict = field(default_factory=dict)  # tohgs.grasps.contactgen_solver.SolverSettings
-    flex: dict = field(default_factory=dict)  # tohgs.grasps.flex.FlexSettings
-    steer: dict = field(default_factory=dict)  # tohgs.models.guidance.GuidanceSettings (scene-aware guidance)
     chunk: int = 8  # configurations per batch of an optimising method (1: one at a time; bounds memory)
 
     def __post_init__(self):
         if self.chunk < 1:
             raise ValueError(f"prediction.chunk must be at least 1, got {self.chunk}")
+        build_blocks(self)
+
+
+@dataclass(frozen=True)
+class GeneratorSettings(SamplingSettings):
+    """The settings of a kind that samples a trained generator, besides every job's: ``sampler`` ``ddpm``
+    (all T steps) or ``ddim`` with ``steps`` steps; GraspDiffuser's classifier-free ``guidance`` scale (1:
+    none; needs cond_dropout); ``contact_smoothing``, the neighbours over which a contact component's maps are
+    averaged (0 or 1: none)."""
+
+    sampler: str = "ddim"
+    steps: int = 20
+    guidance: float = 1.0
+    contact_smoothing: int = 0
 
 
 @dataclass
@@ -79,12 +84,14 @@ class Method:
     pose hands use it) and, for a method of another method (``filtered``), that method's prediction store
     (arrays, attrs); then asked for each test configuration.
 
-    Subclasses set ``needs`` (the method keys that must name components) and implement :meth:`predict`;
-    an optimising method also overrides :meth:`predict_many` to solve the hands of several configurations
-    as one batch, with the same grasps per configuration as :meth:`predict`.
+    Subclasses set ``Settings`` (the settings the kind reads: :class:`SamplingSettings` or a subclass) and
+    implement :meth:`predict`; an optimising method also overrides :meth:`predict_many` to solve the hands
+    of several configurations as one batch, with the same grasps per configuration as :meth:`predict`.
     """
 
-    def __init__(self, name: str, cfg: dict[str, Any], models: dict[str, torch.nn.Module], settings: PredictSettings,
+    Settings: ClassVar[type[SamplingSettings]] = SamplingSettings
+
+    def __init__(self, name: str, cfg: dict[str, Any], models: dict[str, torch.nn.Module], settings: SamplingSettings,
                  device: torch.device, hand: torch.nn.Module | None = None,
                  base: tuple[dict[str, np.ndarray], dict[str, Any]] | None = None):
         self.name, self.cfg, self.models, self.settings, self.device = name, cfg, models, settings, device
@@ -123,6 +130,55 @@ class Method:
         as :meth:`predict` would make it alone (its own streams, maps, selections). This default predicts
         them one at a time."""
         return [self.predict(r.batch, r.shard, r.row, r.generator, r.rng) for r in requests]
+
+
+def smooth_contact(points: torch.Tensor, contact: torch.Tensor, k: int) -> torch.Tensor:
+    """Each contact value replaced by the mean over its ``k`` nearest points (itself among them).
+
+    Args:
+        points: (N, 3) object points, m.
+        contact: (S, N) contact maps of those points, in [0, 1].
+        k: neighbours; ``k <= 1`` returns ``contact`` unchanged.
+
+    Returns:
+        (S, N) smoothed maps, in [0, 1].
+    """
+    if k <= 1:
+        return contact
+    k = min(k, points.shape[0])
+    nn = torch.cdist(points, points).topk(k, largest=False).indices  # (N, k), the point itself first
+    return contact[:, nn].mean(-1)
+
+
+class ContactSource:
+    """Where a method's contact maps come from, the method key ``key`` (``contact``): a contact component
+    (its ``sample_contact``, smoothed by ``settings.contact_smoothing``), :data:`tohgs.methods.GROUND_TRUTH`
+    (the configuration's own task-grasp maps, :meth:`Method.ground_truth`: never smoothed) or
+    :data:`tohgs.methods.NO_CONTACT` (the generator reads no map)."""
+
+    def __init__(self, method: Method, key: str = "contact"):
+        self.method, self.name = method, method.cfg[key]
+        self.model = None if self.name in (GROUND_TRUTH, NO_CONTACT) else method.model(key)
+
+    @property
+    def reads_maps(self) -> bool:
+        """Whether there are maps (the source is not ``none``)."""
+        return self.name != NO_CONTACT
+
+    def maps(self, batch: Batch, shard: MapShard, row: int, generator: torch.Generator, **extra: Any
+             ) -> torch.Tensor | None:
+        """(B, N) contact maps in [0, 1] for ``batch`` (B copies of configuration ``row`` of ``shard``): the
+        component's, sampled with the method's sampler from ``generator`` (``extra``: its guidance arguments);
+        the configuration's ground truth cycled to B (an empty (0, N) tensor where it has no task grasp); None
+        for ``none``."""
+        if not self.reads_maps:
+            return None
+        s = self.method.settings
+        if self.model is not None:
+            contact = self.model.sample_contact(batch, s.sampler, s.steps, generator, **extra)
+            return smooth_contact(batch.points[0], contact, s.contact_smoothing)
+        ids = self.method.ground_truth(shard, row, batch.size)
+        return torch.as_tensor(shard.contact[ids], device=batch.device)
 
 
 def gt_rows(shard: MapShard, row: int) -> np.ndarray:

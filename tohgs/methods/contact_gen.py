@@ -15,30 +15,39 @@ at the end is recorded.
 from __future__ import annotations
 
 import time
-
-from dataclasses import fields
+from dataclasses import dataclass, fields
 
 import numpy as np
 import torch
 
-from tohgs.config import settings_from
 from tohgs.geometry.contact_parts import PartContact
 from tohgs.grasps.contactgen_solver import SolverSettings, representation_of, solve_many
 from tohgs.methods import GROUND_TRUTH
-from tohgs.methods.base import Method, Prediction, Request
+from tohgs.methods.base import Method, Prediction, Request, SamplingSettings
+from tohgs.settings import block
+
+
+@dataclass(frozen=True)
+class ContactGenSettings(SamplingSettings):
+    """Every job's settings and ``contactgen``, the solver's
+    (:class:`tohgs.grasps.contactgen_solver.SolverSettings`)."""
+
+    contactgen: SolverSettings = block(SolverSettings)
 
 
 class ContactGenMethod(Method):
     """Sampled representations, then the solver (module docstring)."""
 
+    Settings = ContactGenSettings
+
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.require_hand("ContactGen's solver poses hands")
         self.generator = None if self.cfg["model"] == GROUND_TRUTH else self.model("model")
-        if self.generator is not None and not getattr(getattr(self.generator, "cfg", None), "parts", False):
+        if self.generator is not None and not self.generator.samples_parts:
             raise ValueError(f"method {self.name!r}: its model {self.cfg['model']!r} samples no parts and directions "
                              "(a contact_gen component with parts: true)")
-        self.solver = settings_from(SolverSettings, self.settings.contactgen)
+        self.solver = self.settings.contactgen
 
     def predict(self, batch, shard, row, generator, rng) -> Prediction | None:
         return self.predict_many([Request(batch, shard, row, generator, rng)])[0]
@@ -52,7 +61,7 @@ class ContactGenMethod(Method):
         if len(ids) == 0:
             return None
         grasp = torch.as_tensor(r.shard.grasp[ids], dtype=r.batch.points.dtype, device=r.batch.device)
-        return representation_of(self.hand, grasp, r.batch.points, float(r.shard.attrs["alpha_contact"]))
+        return representation_of(self.hand, grasp, r.batch.points, r.shard.alpha_contact)
 
     def predict_many(self, requests: list[Request]) -> list[Prediction | None]:
         """Per configuration (its own stream, in order) the sampled (or ground-truth) representations; then

@@ -17,59 +17,48 @@ candidates' and the kept grasps' mean energy).
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import torch
 
 from tohgs.geometry.cloud import even_subset
 from tohgs.geometry.hand_object import contact_values
-from tohgs.methods import GROUND_TRUTH
-from tohgs.methods.base import Method, Prediction
-from tohgs.models.guidance import GraspEnergy, GuidanceSettings, select_diverse
-
-NO_CONTACT = "none"
+from tohgs.methods.base import ContactSource, GeneratorSettings, Method, Prediction, smooth_contact  # noqa: F401
+from tohgs.models.guidance import GuidanceEnergy, GuidanceSettings, select_diverse
+from tohgs.settings import block
 
 
-def smooth_contact(points: torch.Tensor, contact: torch.Tensor, k: int) -> torch.Tensor:
-    """Each contact value replaced by the mean over its ``k`` nearest points (itself among them).
+@dataclass(frozen=True)
+class ContactGraspSettings(GeneratorSettings):
+    """A generator's sampling settings and ``steer``, the scene-aware guidance of its sampling (beyond the
+    paper; every lever off by default). A job is not given ``steer`` while it changes nothing (so that its
+    settings are those of before it existed): its defaults then."""
 
-    Args:
-        points: (N, 3) object points, m.
-        contact: (S, N) contact maps of those points, in [0, 1].
-        k: neighbours; ``k <= 1`` returns ``contact`` unchanged.
-
-    Returns:
-        (S, N) smoothed maps, in [0, 1].
-    """
-    if k <= 1:
-        return contact
-    k = min(k, points.shape[0])
-    nn = torch.cdist(points, points).topk(k, largest=False).indices  # (N, k), the point itself first
-    return contact[:, nn].mean(-1)
+    steer: GuidanceSettings = block(GuidanceSettings, optional=True)
 
 
 class ContactGrasp(Method):
     """Contact maps from a component or the ground truth, then one grasp per map."""
 
+    Settings = ContactGraspSettings
+
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        src = self.cfg["contact"]
-        self.contact_model = None if src in (GROUND_TRUTH, NO_CONTACT) else self.model("contact")
+        self.source = ContactSource(self)
         self.grasp_model = self.model("grasp")
-        reads_maps = getattr(getattr(self.grasp_model, "cfg", None), "contact_input", True)
-        if src == NO_CONTACT and reads_maps:
+        if not self.source.reads_maps and self.grasp_model.reads_contact:
             raise ValueError(f"method {self.name!r}: contact none, but its grasp model {self.cfg['grasp']!r} reads "
                              "contact maps (a grasp_diffuser with contact_input: false reads the object alone)")
-        if src == NO_CONTACT and self.hand is None:
+        if not self.source.reads_maps and self.hand is None:
             raise ValueError(f"method {self.name!r}: without maps the stored maps are the hands'; the job needs the hand model")
-        self.steer = GuidanceSettings(**self.settings.steer)
-        if self.steer.active and not hasattr(self.grasp_model, "set_hand"):
+        self.steer = self.settings.steer
+        if self.steer.active and not self.grasp_model.steerable:
             raise ValueError(f"method {self.name!r}: settings.steer guides a GraspDiffuser's sampling; its grasp "
                              f"model {self.cfg['grasp']!r} is not one (set steer.scale 0)")
-        if self.steer.contact_active and not (self.contact_model is not None
-                                              and hasattr(self.contact_model, "schedule")):
+        if self.steer.contact_active and not (self.source.model is not None and self.source.model.steerable):
             raise ValueError(f"method {self.name!r}: steer.contact_scale guides a ContactDiffuser's sampling; its "
-                             f"contact source {src!r} is not one (set steer.contact_scale 0)")
+                             f"contact source {self.source.name!r} is not one (set steer.contact_scale 0)")
         if self.steer.active or self.steer.selects:
             self.require_hand("guided sampling and sample-score-keep (settings.steer) pose hands")
 
@@ -77,22 +66,6 @@ class ContactGrasp(Method):
         """The guidance arguments of ``sample_grasps``: none unless ``settings.steer`` is active (a grasp
         model without guidance, e.g. a CVAE, is then never asked for it)."""
         return {"steer": self.steer, "hand": self.hand} if self.steer.active else {}
-
-    def _contact(self, batch, shard, row, generator) -> torch.Tensor | None:
-        """(B, N) contact maps for the batch (B copies of one configuration): sampled by the contact component
-        (guided by ``steer.contact_scale``) and smoothed, or the configuration's ground truth cycled to B; None
-        for a configuration without ground truth."""
-        s = self.settings
-        if self.contact_model is not None:
-            extra = {}
-            if self.steer.contact_active:
-                extra = {"steer": self.steer, "distance_alpha": float(shard.attrs.get("alpha_distance", 30.0))}
-            contact = self.contact_model.sample_contact(batch, s.sampler, s.steps, generator, **extra)
-            return smooth_contact(batch.points[0], contact, s.contact_smoothing)
-        ids = self.ground_truth(shard, row, batch.size)
-        if len(ids) == 0:
-            return None
-        return torch.as_tensor(shard.contact[ids], device=batch.device)
 
     def _select(self, batch, contact: torch.Tensor, grasp: torch.Tensor, keep: int
                 ) -> tuple[torch.Tensor, torch.Tensor, dict[str, float]]:
@@ -105,7 +78,7 @@ class ContactGrasp(Method):
             for i in range(0, grasp.shape[0], keep):  # one chunk of S at a time: the energy's distance matrices
                 part = batch.index(torch.arange(i, min(i + keep, grasp.shape[0]), device=grasp.device))
                 part = part.with_contact(contact[i:i + keep])
-                energy.append(GraspEnergy.of_batch(self.hand, part, self.steer)(grasp[i:i + keep]))
+                energy.append(GuidanceEnergy.of_batch(self.hand, part, self.steer)(grasp[i:i + keep]))
                 verts.append(self.hand(grasp[i:i + keep]).vertices[:, sub])
         energy, verts = torch.cat(energy), torch.cat(verts)
         idx = select_diverse(energy, verts, keep, self.steer.pool)
@@ -117,15 +90,18 @@ class ContactGrasp(Method):
         t0 = time.perf_counter()
         if self.steer.selects:  # candidates x S copies of the configuration
             batch = batch.index(torch.zeros(s.samples * self.steer.candidates, dtype=torch.long, device=batch.device))
-        if self.cfg["contact"] == NO_CONTACT:
+        if not self.source.reads_maps:
             grasp = self.grasp_model.sample_grasps(batch, s.sampler, s.steps, generator, s.guidance, **self._steer())
             t1 = time.perf_counter()
             with torch.no_grad():
-                contact, _ = contact_values(batch.points, self.hand(grasp).vertices, float(shard.attrs.get("alpha_contact", 100.0)))
+                contact, _ = contact_values(batch.points, self.hand(grasp).vertices, shard.alpha_contact)
             seconds = {"grasp": t1 - t0, "contact_map": time.perf_counter() - t1}
         else:
-            contact = self._contact(batch, shard, row, generator)
-            if contact is None:
+            extra = {}
+            if self.steer.contact_active:  # guided off the object points near the scene
+                extra = {"steer": self.steer, "distance_alpha": shard.alpha_distance}
+            contact = self.source.maps(batch, shard, row, generator, **extra)
+            if len(contact) == 0:  # ground truth, and the configuration has no task grasp
                 return None
             t1 = time.perf_counter()
             grasp = self.grasp_model.sample_grasps(batch.with_contact(contact), s.sampler, s.steps, generator,

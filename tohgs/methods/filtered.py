@@ -25,10 +25,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from tohgs.config import settings_from
 from tohgs.geometry.cloud import penetration_fraction
 from tohgs.geometry.registration import ICPSettings, register_many, transform_error
-from tohgs.methods.base import Method, Prediction, Request
+from tohgs.methods.base import Method, Prediction, Request, SamplingSettings
+from tohgs.settings import block, settings_from
 
 TRANSFORMS = ("icp", "true")
 
@@ -97,14 +97,23 @@ def estimate_goal_transforms(views: list[tuple[np.ndarray, np.ndarray, np.ndarra
     return out
 
 
+@dataclass(frozen=True)
+class FilteredSettings(SamplingSettings):
+    """Every job's settings and ``filter``, the filter's (:class:`FilterSettings`)."""
+
+    filter: FilterSettings = block(FilterSettings)
+
+
 class Filtered(Method):
     """The base method's grasps, those entering the scene at either pose discarded (module docstring)."""
+
+    Settings = FilteredSettings
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         if self.hand is None or self.base is None:
             raise ValueError(f"method {self.name!r}: a filter needs the hand model and the base method's predictions")
-        self.filter = settings_from(FilterSettings, self.settings.filter)
+        self.filter = self.settings.filter
         self.icp = settings_from(ICPSettings, self.filter.icp)
         arrays, attrs = self.base
         self.rows = {(attrs["objects"][int(o)], int(c)): i

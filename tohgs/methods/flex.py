@@ -12,24 +12,34 @@ per configuration the mean energy of the first and of the last step is recorded.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import torch
 
-from tohgs.config import settings_from
 from tohgs.geometry.hand_object import contact_values
 from tohgs.grasps.flex import FlexSettings, optimise_many
-from tohgs.methods.base import Method, Prediction, Request
+from tohgs.methods.base import Method, Prediction, Request, SamplingSettings
+from tohgs.settings import block
+
+
+@dataclass(frozen=True)
+class FlexMethodSettings(SamplingSettings):
+    """Every job's settings and ``flex``, the optimisation's (:class:`tohgs.grasps.flex.FlexSettings`)."""
+
+    flex: FlexSettings = block(FlexSettings)
 
 
 class Flex(Method):
     """The optimisation per configuration (module docstring)."""
 
+    Settings = FlexMethodSettings
+
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.require_hand("FLEX poses hands")
         self.prior = self.model("prior")
-        self.flex = settings_from(FlexSettings, self.settings.flex)
+        self.flex = self.settings.flex
         if self.flex.survivors() < self.settings.samples:
             raise ValueError(f"method {self.name!r}: prediction.flex keeps {self.flex.survivors()} of its "
                              f"{self.flex.batch} candidates, fewer than the {self.settings.samples} samples: raise flex.batch")
@@ -53,7 +63,7 @@ class Flex(Method):
         out = []
         for r, g, history in zip(requests, grasp.split(self.settings.samples), histories):
             with torch.no_grad():
-                alpha = float(r.shard.attrs.get("alpha_contact", 100.0))
+                alpha = r.shard.alpha_contact
                 contact, _ = contact_values(r.batch.points, self.hand(g).vertices, alpha)
             info = {"energy_start": history["energy"][0], "energy_end": history["energy"][-1]} if history else {}
             out.append(Prediction(contact.cpu().numpy().astype(np.float32), g.cpu().numpy().astype(np.float64),

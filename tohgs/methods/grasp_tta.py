@@ -20,42 +20,36 @@ map, the stored contact maps are ContactNet's for the adapted hands (what the ad
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import torch
 
-from tohgs.config import settings_from
 from tohgs.grasps.tta import TTASettings, adapt_many, by_problem, pose_problems
-from tohgs.methods.base import Method, Prediction, Request
-from tohgs.methods.contact_grasp import GROUND_TRUTH, NO_CONTACT, smooth_contact
+from tohgs.methods.base import ContactSource, GeneratorSettings, Method, Prediction, Request
+from tohgs.settings import block
+
+
+@dataclass(frozen=True)
+class GraspTTASettings(GeneratorSettings):
+    """A generator's sampling settings and ``tta``, the adaptation's (:class:`tohgs.grasps.tta.TTASettings`)."""
+
+    tta: TTASettings = block(TTASettings)
 
 
 class GraspTTA(Method):
     """A generator's grasps, adapted (module docstring)."""
+
+    Settings = GraspTTASettings
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.require_hand("GraspTTA adapts hands")
         self.generator = self.model("cvae")
         self.contact_net = self.model("contact_net")
-        src = self.cfg["contact"]
-        self.contact_model = None if src in (NO_CONTACT, GROUND_TRUTH) else self.model("contact")
-        self.tta = settings_from(TTASettings, self.settings.tta)
-        self.alpha = float(getattr(self.contact_net, "alpha_contact", 100.0))
-
-    def contact_maps(self, batch, shard, row, generator) -> torch.Tensor | None:
-        """(S, N) the maps the generator reads: none, a contact component's or the ground truth's (an
-        empty tensor where the configuration has no task grasp)."""
-        s, src = self.settings, self.cfg["contact"]
-        if src == NO_CONTACT:
-            return None
-        if src == GROUND_TRUTH:
-            ids = self.ground_truth(shard, row)
-            if len(ids) == 0:
-                return torch.zeros(0)
-            return torch.as_tensor(shard.contact[ids], device=batch.device)
-        contact = self.contact_model.sample_contact(batch, s.sampler, s.steps, generator)
-        return smooth_contact(batch.points[0], contact, s.contact_smoothing)
+        self.source = ContactSource(self)
+        self.tta = self.settings.tta
+        self.alpha = float(self.contact_net.alpha_contact)
 
     def predict(self, batch, shard, row, generator, rng) -> Prediction | None:
         return self.predict_many([Request(batch, shard, row, generator, rng)])[0]
@@ -68,7 +62,7 @@ class GraspTTA(Method):
         staged = []  # (index, batch with its maps, maps or None, coarse grasps, seconds)
         for i, r in enumerate(requests):
             t0 = time.perf_counter()
-            contact = self.contact_maps(r.batch, r.shard, r.row, r.generator)
+            contact = self.source.maps(r.batch, r.shard, r.row, r.generator)
             if contact is not None and contact.numel() == 0:
                 continue
             batch = r.batch if contact is None else r.batch.with_contact(contact)

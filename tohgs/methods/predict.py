@@ -18,15 +18,14 @@ from typing import Any
 import numpy as np
 import torch
 
-from tohgs.config import settings_from
 from tohgs.data.batch import Batch
 from tohgs.data.maps import MapDataset
 from tohgs.data.predictions import read_predictions, write_predictions
 from tohgs.geometry.grasp import GRASP_DIM, transform_grasp
-from tohgs.methods import method_kind_exists, method_kinds
-from tohgs.methods.base import Method, PredictSettings, Request
-from tohgs.models.checkpoint import load_component
-from tohgs.models.train import pick_device
+from tohgs.methods import method_kind_exists, method_kinds, method_module
+from tohgs.methods.base import GeneratorSettings, Method, Request
+from tohgs.models.checkpoint import load_component, pick_device
+from tohgs.settings import settings_from
 
 log = logging.getLogger(__name__)
 
@@ -35,7 +34,7 @@ def method_class(kind: str) -> type[Method]:
     """The class ``METHOD`` of ``tohgs.methods.<kind>``; ``ValueError`` for an unknown kind."""
     if not method_kind_exists(kind):
         raise ValueError(f"unknown method kind {kind!r} (known: {', '.join(method_kinds())})")
-    return importlib.import_module(f"tohgs.methods.{kind}").METHOD
+    return importlib.import_module(method_module(kind)).METHOD
 
 
 def configuration_streams(seed: int, obj: str, config_index: int) -> tuple[torch.Generator, np.random.Generator]:
@@ -49,7 +48,8 @@ def configuration_streams(seed: int, obj: str, config_index: int) -> tuple[torch
 
 def predict(task: str, name: str, method: dict[str, Any], test_shards: list[str | Path],
             checkpoints: dict[str, str | Path], settings: dict[str, Any], out: str | Path,
-            hand: str | Path | None = None, base: str | Path | None = None) -> dict[str, np.ndarray]:
+            hand: str | Path | None = None, base: str | Path | None = None, complete: bool = False
+            ) -> dict[str, np.ndarray]:
     """Predict S grasps per test configuration of ``task`` with the method ``name`` and write the store ``out``.
 
     Args:
@@ -57,14 +57,18 @@ def predict(task: str, name: str, method: dict[str, Any], test_shards: list[str 
         method: the method's config block (``kind`` and its keys).
         test_shards: the task's test map shards.
         checkpoints: the trained components the method names, by config name.
-        settings: a mapping of :class:`tohgs.methods.base.PredictSettings`.
+        settings: a mapping of the kind's ``Settings`` (:attr:`tohgs.methods.base.Method.Settings`): a key the
+            kind does not read is an error.
         hand: the hand file (``results/hand/hand.npz``), for the methods that pose hands.
         base: the prediction store of the method this one is of (kind ``filtered``: its key ``of``).
+        complete: ``settings`` must hold every key the kind reads (the workflow's jobs: a missing key is an
+            error, not the dataclass's default).
 
     Returns:
         The arrays written (:mod:`tohgs.data.predictions`).
     """
-    s = settings_from(PredictSettings, settings)
+    kind = method_class(method["kind"])
+    s = settings_from(kind.Settings, settings, complete=complete, where=f"method {name!r} (kind {method['kind']}): settings")
     torch.set_num_threads(max(1, s.threads))
     # PyTorch's inference "fast path" for transformer layers materialises ContactDiffuser's 512 x 512
     # attention; the regular path runs scaled_dot_product_attention and is 1.7x faster per layer on a CPU
@@ -81,8 +85,7 @@ def predict(task: str, name: str, method: dict[str, Any], test_shards: list[str 
         from tohgs.hand import HandAssets, HandModel
 
         hand_model = HandModel(HandAssets.load(hand)).to(device)
-    runner = method_class(method["kind"])(name, method, models, s, device, hand_model,
-                                          None if base is None else read_predictions(base))
+    runner = kind(name, method, models, s, device, hand_model, None if base is None else read_predictions(base))
     data = MapDataset(test_shards, per="config")
     rows: dict[str, list] = {k: [] for k in ("object_id", "config_index", "contact", "grasp_init", "grasp_goal", "kept")}
     diagnostics: dict[str, list[float]] = {}
@@ -141,9 +144,10 @@ def predict(task: str, name: str, method: dict[str, Any], test_shards: list[str 
                                "discarded": discarded,
                                "diagnostics": {k: [None if np.isnan(x) else x for x in v] for k, v in diagnostics.items()}},
                       out)
-    log.info("%s/%s: %d configurations x %d grasps (%d skipped, %d grasps discarded); %s (%s, %d steps)", task, name, n,
+    sampler = f" ({s.sampler}, {s.steps} steps)" if isinstance(s, GeneratorSettings) else ""
+    log.info("%s/%s: %d configurations x %d grasps (%d skipped, %d grasps discarded); %s%s", task, name, n,
              s.samples, skipped, discarded, ", ".join(f"{k} {v:.3f} s" for k, v in timing.items()) or "no timing",
-             s.sampler, s.steps)
+             sampler)
     for k, v in diagnostics.items():
         log.info("%s/%s: %s mean %.4g, median %.4g over %d configurations", task, name, k, np.nanmean(v),
                  np.nanmedian(v), len(v))

@@ -35,7 +35,7 @@ import pandas as pd
 import trimesh
 
 from tohgs.assets.mesh import collision_mesh, object_mesh
-from tohgs.config import settings_from
+from tohgs.settings import settings_from
 from tohgs.data.predictions import read_predictions
 from tohgs.data.scenes import read_scenes
 from tohgs.geometry.grasp import pose_matrix

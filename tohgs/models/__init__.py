@@ -4,19 +4,19 @@ config validation use :func:`component_kind_exists` and :data:`CHECKED_KINDS` at
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
+
+from tohgs.kinds import kind_modules
 
 CHECKED_KINDS = ("contact_diffuser", "grasp_diffuser", "contact_gen")  # component kinds with checks (checks.py)
 _MODELS_DIR = Path(__file__).resolve().parent
-_KIND = re.compile(r"[a-z][a-z0-9_]*")
-
-
-def component_kind_exists(kind: str) -> bool:
-    """Whether ``kind`` names a component module ``tohgs/models/<kind>.py`` (checked without importing it)."""
-    return bool(_KIND.fullmatch(kind)) and (_MODELS_DIR / f"{kind}.py").is_file()
 
 
 def component_kinds() -> list[str]:
-    """Every component kind (a module of this package with a ``COMPONENT``)."""
-    return sorted(p.stem for p in _MODELS_DIR.glob("*.py") if "COMPONENT =" in p.read_text())
+    """Every component kind: a module ``tohgs/models/<kind>.py`` that binds ``COMPONENT`` (read as text)."""
+    return list(kind_modules(_MODELS_DIR, "COMPONENT"))
+
+
+def component_kind_exists(kind: str) -> bool:
+    """Whether ``kind`` is a component kind (:func:`component_kinds`; ``train``, the loop's module, is not)."""
+    return kind in component_kinds()

@@ -1,4 +1,5 @@
-"""The one checkpoint format of every component, and its loader (``torch.load(weights_only=True)``).
+"""The one checkpoint format of every component, its loader (``torch.load(weights_only=True)``) and the device a
+job loads it onto (:func:`pick_device`).
 
 ``results/models/<task>/<component>.pt`` is a dict of plain data (tensors, numbers, strings, lists, dicts),
 so loading it runs no code:
@@ -67,6 +68,27 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     if not isinstance(obj, dict):
         raise ValueError(f"{path}: not a tohgs checkpoint (a {type(obj).__name__}, not a dict)")
     return obj
+
+
+def pick_device(device: str) -> torch.device:
+    """``"auto"``: CUDA when there is a device, else the CPU; ``"cpu"``; ``"cuda"`` / ``"cuda:k"``, which must exist.
+
+    Raises:
+        ValueError: a CUDA device is asked for where there is none (the message says why and what to set).
+    """
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    dev = torch.device(device)
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            why = ("this torch is a CPU build" if torch.version.cuda is None
+                   else f"torch {torch.__version__} sees no CUDA device")
+            raise ValueError(f"device {device!r} was asked for, but {why}; set the device to 'auto' (CUDA where "
+                             "there is one, else the CPU) or 'cpu'")
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise ValueError(f"device {device!r} was asked for, but there are only {torch.cuda.device_count()} "
+                             "CUDA devices")
+    return dev
 
 
 def load_component(path: str | Path, device: str | torch.device = "cpu", task: str | None = None,

@@ -303,7 +303,7 @@ def representation_fit(model, hand: HandModel, data: MapDataset, curve: list[dic
 
     g = torch.Generator().manual_seed(seed)
     by_config, keys = _configurations(data, max_configs)
-    alpha = float(data.shards[0].attrs["alpha_contact"])
+    alpha = data.shards[0].alpha_contact
     ious, base, frac, true_frac, alike, agree = [], [], [], [], [], []
     hist_s, hist_t = torch.zeros(N_PARTS), torch.zeros(N_PARTS)
     for key in keys:

@@ -37,7 +37,24 @@ class Component(nn.Module):
 
     kind: ClassVar[str] = ""
     Config: ClassVar[type]
+    #: What it samples, the ``x-role`` of its kind in the schema (``$defs.networks.<kind>``; a test keeps them
+    #: equal): ``contact`` (``sample_contact``), ``grasp`` (``sample_grasps``), ``hand_contact``, ``pose_prior``.
+    role: ClassVar[str] = ""
     needs_hand: ClassVar[bool] = False  # the loss poses the hand: training passes the hand model
+    #: Its sampler takes scene-aware guidance (``steer``, :mod:`tohgs.models.guidance`).
+    steerable: ClassVar[bool] = False
+
+    @property
+    def reads_contact(self) -> bool:
+        """Whether its sampler reads the batch's contact maps (a grasp generator conditioned on them; its
+        network config may say so): False unless the kind says otherwise."""
+        return False
+
+    @property
+    def samples_parts(self) -> bool:
+        """Whether it samples ContactGen's object-centric representation with parts and directions
+        (``sample_representation``): False unless the kind says otherwise."""
+        return False
 
     def prepare(self, data, task: str, hand=None) -> None:
         """Set what the training data fixes before the first step (``data``: a

@@ -60,6 +60,8 @@ class ContactDiffuser(Component):
 
     kind = "contact_diffuser"
     Config = ContactDiffuserConfig
+    role = "contact"
+    steerable = True
 
     def __init__(self, cfg: ContactDiffuserConfig):
         super().__init__()

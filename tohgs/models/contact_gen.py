@@ -32,13 +32,13 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from tohgs.config import settings_from
 from tohgs.data.batch import Batch
 from tohgs.geometry.contact_parts import N_PARTS, PartContact, part_contact
 from tohgs.hand.model import HandModel
 from tohgs.models.component import Component
 from tohgs.models.grasp_cvae import _mlp
 from tohgs.models.pointnet2 import PointNet2, PointNet2Config
+from tohgs.settings import settings_from
 
 STAGES = ("contact", "part", "direction")
 
@@ -104,7 +104,13 @@ class ContactGen(Component):
 
     kind = "contact_gen"
     Config = ContactGenConfig
+    role = "contact"
     needs_hand = True
+
+    @property
+    def samples_parts(self) -> bool:
+        """Whether it samples parts and directions besides the contact (``parts``)."""
+        return bool(self.cfg.parts)
 
     def __init__(self, cfg: ContactGenConfig):
         super().__init__()
@@ -123,7 +129,7 @@ class ContactGen(Component):
         """Before training: the hand (the part and direction targets pose it) and the shards' alpha."""
         if hand is None and self.cfg.parts:
             raise ValueError("ContactGen's part and direction targets need the hand model; pass hand=")
-        self.alpha_contact.fill_(float(data.shards[0].attrs.get("alpha_contact", 100.0)))
+        self.alpha_contact.fill_(data.shards[0].alpha_contact)
         self._training = {"hand": hand}
 
     def features(self, batch: Batch) -> tuple[torch.Tensor, torch.Tensor]:

@@ -24,13 +24,13 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from tohgs.config import settings_from
 from tohgs.data.batch import Batch
 from tohgs.geometry.hand_object import contact_values
 from tohgs.hand.model import HandModel
 from tohgs.models.component import Component
 from tohgs.models.grasp_cvae import ENCODER_SCALE, _mlp, bbox_diagonal
 from tohgs.models.pointnet2 import PointNet
+from tohgs.settings import settings_from
 
 
 @dataclass(frozen=True)
@@ -77,6 +77,7 @@ class ContactNet(Component):
 
     kind = "contact_net"
     Config = ContactNetConfig
+    role = "hand_contact"
     needs_hand = True
 
     def __init__(self, cfg: ContactNetConfig):
@@ -97,7 +98,7 @@ class ContactNet(Component):
         """Before training: the hand (the loss poses it) and the shards' contact alpha."""
         if hand is None:
             raise ValueError("ContactNet trains with the hand model; pass hand=")
-        self.alpha_contact.fill_(float(data.shards[0].attrs.get("alpha_contact", 100.0)))
+        self.alpha_contact.fill_(data.shards[0].alpha_contact)
         self._training = {"hand": hand}
 
     def object_features(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -40,14 +40,14 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from tohgs.config import settings_from
 from tohgs.data.batch import Batch
 from tohgs.geometry.grasp import GRASP_DIM
-from tohgs.geometry.rot6d import VECTOR_DIM, grasp_from_palm_rot6d, palm_rot6d
 from tohgs.geometry.hand_object import contact_values, inside_hand, vertex_normals
+from tohgs.geometry.rot6d import VECTOR_DIM, grasp_from_palm_rot6d, palm_rot6d
 from tohgs.hand.model import HandModel
 from tohgs.models.component import Component, seen_grasps
 from tohgs.models.pointnet2 import PointNet
+from tohgs.settings import settings_from
 
 PAPER_POINTS = 2048  # the point sums of L_pen and L_cons are scaled to this many points
 # The PointNets read coordinates (and the bounding-box diagonal) in decimetres: in metres a hand or an
@@ -104,7 +104,13 @@ class GraspCVAE(Component):
 
     kind = "grasp_cvae"
     Config = GraspCVAEConfig
+    role = "grasp"
     needs_hand = True
+
+    @property
+    def reads_contact(self) -> bool:
+        """Whether it reads the batch's contact maps (``contact_channel``: M-GraspTTA's)."""
+        return bool(self.cfg.contact_channel)
 
     def __init__(self, cfg: GraspCVAEConfig):
         super().__init__()
@@ -133,7 +139,7 @@ class GraspCVAE(Component):
         self.grasp_mean.copy_(grasps.mean(0))
         std = grasps.std(0) if grasps.shape[0] > 1 else torch.zeros_like(grasps[0])
         self.grasp_std.copy_(std.clamp_min(1e-3))
-        self._training = {"hand": hand, "alpha_contact": float(data.shards[0].attrs.get("alpha_contact", 100.0))}
+        self._training = {"hand": hand, "alpha_contact": data.shards[0].alpha_contact}
 
     def in_frame(self, grasp: torch.Tensor, points: torch.Tensor, contact: torch.Tensor) -> torch.Tensor:
         """(B, 54) the grasps as the network regresses them: palm-centred 6D vectors of the network frame

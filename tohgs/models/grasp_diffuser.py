@@ -72,7 +72,7 @@ from tohgs.hand.model import HandModel
 from tohgs.hand.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from tohgs.models.component import Component, seen_grasps
 from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, TimeMLP, sample
-from tohgs.models.guidance import GraspEnergy, GuidanceSettings, guidance_step
+from tohgs.models.guidance import GuidanceEnergy, GuidanceSettings, guidance_step
 from tohgs.models.pointnet2 import PointNet, PointNet2, PointNet2Config
 
 LOSS_WEIGHTS = {"placing": (15.0, 1.0, 5.0, 0.002), "shelving": (15.0, 1.0, 5.0, 0.002),
@@ -244,7 +244,14 @@ class GraspDiffuser(Component):
 
     kind = "grasp_diffuser"
     Config = GraspDiffuserConfig
+    role = "grasp"
+    steerable = True
     needs_hand = True
+
+    @property
+    def reads_contact(self) -> bool:
+        """Whether it is conditioned on the batch's contact maps (``contact_input``; SceneDiffuser's is not)."""
+        return bool(self.cfg.contact_input)
 
     def __init__(self, cfg: GraspDiffuserConfig):
         super().__init__()
@@ -301,7 +308,7 @@ class GraspDiffuser(Component):
         self.set_hand(hand)
         self.set_normaliser(seen_grasps(self, data, self.wrist.device))
         self._training = {"hand": hand, "weights": LOSS_WEIGHTS.get(task, LOSS_WEIGHTS["placing"]),
-                          "alpha_contact": float(data.shards[0].attrs.get("alpha_contact", 100.0))}
+                          "alpha_contact": data.shards[0].alpha_contact}
 
     def loss(self, batch: Batch, generator: torch.Generator) -> dict[str, torch.Tensor]:
         """The weighted sum of the four terms (module docstring) at a uniform timestep per sample, with each
@@ -339,7 +346,7 @@ class GraspDiffuser(Component):
         if steer is not None and steer.active:
             if hand is None:
                 raise ValueError("guided sampling (steer) poses hands: it needs the hand model")
-            guide = guidance_step(lambda x: self.decode(x, cond), GraspEnergy.of_batch(hand, batch, steer), steer,
+            guide = guidance_step(lambda x: self.decode(x, cond), GuidanceEnergy.of_batch(hand, batch, steer), steer,
                                   self.diffusion.timesteps)
         x0 = sample(lambda xt, tt: self.guided(xt, tt, cond, guidance), (batch.size, self.dim), self.diffusion,
                     sampler, steps, generator, batch.device, guide)

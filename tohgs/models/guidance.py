@@ -59,7 +59,7 @@ from tohgs.models.guidance_settings import GuidanceSettings  # noqa: F401 (re-ex
 TERMS = ("scene", "object", "contact", "joints")
 
 
-class GraspEnergy:
+class GuidanceEnergy:
     """The guidance energy of (B, 51) network-frame grasps for one batch's objects and scenes.
 
     Args:
@@ -82,7 +82,7 @@ class GraspEnergy:
         self.limits = lim if bool((lim[:, 1] > lim[:, 0]).any()) else None
 
     @classmethod
-    def of_batch(cls, hand, batch, settings: GuidanceSettings) -> "GraspEnergy":
+    def of_batch(cls, hand, batch, settings: GuidanceSettings) -> "GuidanceEnergy":
         """The energy of a :class:`tohgs.data.batch.Batch` (its contact map, if it has one)."""
         return cls(hand, batch.points, batch.normals, batch.scene, batch.scene_normals, batch.goal_transform,
                    batch.contact, settings)

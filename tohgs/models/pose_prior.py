@@ -22,10 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from tohgs.config import settings_from
 from tohgs.data.batch import Batch
 from tohgs.models.component import Component
 from tohgs.models.grasp_cvae import _mlp
+from tohgs.settings import settings_from
 
 N_FINGER = 45  # the finger numbers of a grasp (15 joints x 3, axis-angle)
 
@@ -53,6 +53,7 @@ class PosePrior(Component):
 
     kind = "pose_prior"
     Config = PosePriorConfig
+    role = "pose_prior"
 
     def __init__(self, cfg: PosePriorConfig):
         super().__init__()

@@ -20,13 +20,13 @@ from typing import Any
 import numpy as np
 import torch
 
-from tohgs.config import settings_from
 from tohgs.data.batch import Batch
 from tohgs.data.maps import MapDataset
 from tohgs.hand.model import HandModel
 from tohgs.io import atomic_path, content_key
-from tohgs.models.checkpoint import load_checkpoint, save_checkpoint
+from tohgs.models.checkpoint import load_checkpoint, pick_device, save_checkpoint
 from tohgs.models.component import build_component
+from tohgs.settings import settings_from
 
 log = logging.getLogger(__name__)
 
@@ -103,27 +103,6 @@ class EMA:
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.decay, self.step_count = float(state["decay"]), int(state["step_count"])
         self.shadow = [t.clone() for t in state["shadow"]]
-
-
-def pick_device(device: str) -> torch.device:
-    """``"auto"``: CUDA when there is a device, else the CPU; ``"cpu"``; ``"cuda"`` / ``"cuda:k"``, which must exist.
-
-    Raises:
-        ValueError: a CUDA device is asked for where there is none (the message says why and what to set).
-    """
-    if device == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    dev = torch.device(device)
-    if dev.type == "cuda":
-        if not torch.cuda.is_available():
-            why = ("this torch is a CPU build" if torch.version.cuda is None
-                   else f"torch {torch.__version__} sees no CUDA device")
-            raise ValueError(f"device {device!r} was asked for, but {why}; set the device to 'auto' (CUDA where "
-                             "there is one, else the CPU) or 'cpu'")
-        if dev.index is not None and dev.index >= torch.cuda.device_count():
-            raise ValueError(f"device {device!r} was asked for, but there are only {torch.cuda.device_count()} "
-                             "CUDA devices")
-    return dev
 
 
 def gradient_shares(model: torch.nn.Module, losses: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
@@ -228,7 +207,7 @@ def train_component(component: str, kind: str, task: str, shard_paths: list[str 
     ema.copy_to(model.parameters())
     ckpt = save_checkpoint(out, model, component, task, network, asdict(s), loss_curve=curve, seconds=spent,
                            n_parameters=n_params, n_train_grasps=len(data),
-                           alpha_contact=float(data.shards[0].attrs.get("alpha_contact", 100.0)),
+                           alpha_contact=data.shards[0].alpha_contact,
                            hand_wrist=data.shards[0].attrs["hand_wrist"])
     resume.unlink(missing_ok=True)
     if curve_png is not None:

@@ -13,15 +13,15 @@ if str(REPO) not in sys.path:  # parse time only; jobs import the installed pack
     sys.path.insert(0, str(REPO))
 
 from tohgs.code_inputs import code_inputs
-from tohgs.config import (ConfigError, add_seed_replicas, drop_ground_truth_rows, load_schema, method_setting_keys,
-                          settings_from, validate_config)
+from tohgs.config import ConfigError, add_seed_replicas, drop_ground_truth_rows, job_settings, load_schema, validate_config
 from tohgs.assets.objects import check_split_sizes, read_catalog
 from tohgs.assets.sources import select_objects, task_set
 from tohgs.grasps.filter import SCREEN_KEYS
 from tohgs.official.importer import read_import
-from tohgs.methods import method_components
+from tohgs.methods import method_components, of_chain
 from tohgs.models import CHECKED_KINDS
 from tohgs.models.guidance_settings import GuidanceSettings
+from tohgs.settings import settings_from
 
 _SCHEMA = load_schema()
 try:
@@ -294,10 +294,7 @@ def used_methods():
     names += [m for ms in config["figures"]["comparisons"].values() for m in ms]
     out = []
     for m in names:  # with the methods they are of (kind filtered), first
-        chain = [m]
-        while "of" in METHODS[chain[-1]]:
-            chain.append(METHODS[chain[-1]]["of"])
-        out += reversed(chain)
+        out += reversed(of_chain(m, METHODS))
     return list(dict.fromkeys(out))
 
 
@@ -316,27 +313,13 @@ def component_settings(wildcards):
     return _canonical({**config["training"], **COMPONENTS[wildcards.component]["training"]})
 
 
-# The prediction settings each method kind reads (None: all), from the schema, once.
-_SETTING_KEYS = {kind: method_setting_keys(kind, _SCHEMA) for kind in {m["kind"] for m in METHODS.values()}}
-
-
-def _overlaid(base, overlay):
-    """``base`` with ``overlay``'s keys, sub-blocks merged key by key (a method's ``filter: {transform: icp}``
-    keeps the other filter settings)."""
-    out = dict(base)
-    for k, v in overlay.items():
-        out[k] = _overlaid(base[k], v) if isinstance(v, dict) and isinstance(base.get(k), dict) else v
-    return out
-
-
 def method_settings(wildcards):
-    """The sampling settings of one method: the prediction block overlaid with the method's own, only those
-    its kind reads (so a sampler setting leaves the dataset row's draw be)."""
-    settings = _overlaid(config["prediction"], METHODS[wildcards.method]["settings"])
-    keys = _SETTING_KEYS[METHODS[wildcards.method]["kind"]]
+    """The prediction settings of one method's jobs, exactly those its kind reads (tohgs.config.job_settings:
+    so a sampler setting leaves the dataset row's draw be); ``steer`` only while it changes the sampling."""
+    settings = job_settings(config, wildcards.method, _SCHEMA)
     if not settings_from(GuidanceSettings, settings.get("steer")).changes_sampling:
         settings.pop("steer", None)  # every lever off: the faithful sampler's settings, as before it existed
-    return _canonical({k: v for k, v in settings.items() if keys is None or k in keys})
+    return _canonical(settings)
 
 
 def figure_methods(wildcards):

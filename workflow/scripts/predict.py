@@ -10,4 +10,5 @@ from tohgs.methods.predict import predict  # noqa: E402
 inp, p = snakemake.input, snakemake.params
 out = Path(snakemake.output[0])
 predict(snakemake.wildcards.task, out.stem, p.method, inp.shards, {Path(m).stem: m for m in inp.models},
-        {**p.settings, "threads": snakemake.threads}, out, hand=inp.hand, base=inp.base[0] if inp.base else None)
+        {**p.settings, "threads": snakemake.threads}, out, hand=inp.hand, base=inp.base[0] if inp.base else None,
+        complete=True)
