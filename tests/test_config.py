@@ -116,7 +116,7 @@ def test_a_config_adds_methods_and_tables_to_the_built_in_ones_and_fills_their_d
     assert set(cfg["methods"]) == {"dataset", "ours", "ours-gt-contact", "grasptta", "f-grasptta", "m-grasptta-ta",
                                    "m-grasptta-gt", "m-grasptta-oc", "contactgen", "contactgen-gt", "cc-gd", "scenediffuser",
                                    "flex", "ours-ddpm"}
-    assert set(cfg["tables"]) == {"table1", "table2", "table4", "table5", "contactgen_gate", "samplers"}
+    assert set(cfg["tables"]) == {"table1", "table2", "table4", "table5", "table_contactgen_gate", "samplers"}
     assert cfg["tables"]["samplers"]["columns"][-1] == "discarded" and cfg["tables"]["samplers"]["pending"] == []
     gd = cfg["components"]["grasp_diffuser"]
     # a built-in entry overlaid: the keys the config does not give come from the built-in one
@@ -196,7 +196,7 @@ def test_an_import_without_ground_truth_leaves_out_exactly_the_rows_that_read_it
         "dataset", "ours-gt-contact", "m-grasptta-gt", "contactgen-gt", "f-gt"]
     dropped = drop_ground_truth_rows(cfg, "no truth here")
     assert dropped == ["dataset", "ours-gt-contact", "m-grasptta-gt", "f-gt", "contactgen-gt"]
-    assert cfg["tables"]["contactgen_gate"]["rows"] == ["contactgen"]
+    assert cfg["tables"]["table_contactgen_gate"]["rows"] == ["contactgen"]
     assert cfg["tables"]["table1"]["rows"] == ["grasptta", "f-grasptta", "contactgen", "scenediffuser", "flex", "ours"]
     assert cfg["tables"]["table1"]["pending"] == [{"label": "Dataset", "reason": "no truth here"},
                                                   {"label": "Ours (GT contact)", "reason": "no truth here"}]
