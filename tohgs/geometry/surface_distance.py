@@ -116,12 +116,12 @@ def closest_faces(points: torch.Tensor, vertices: torch.Tensor, faces: torch.Ten
         return out
 
 
-def corner_normals(vertices: torch.Tensor, faces: torch.Tensor, corners: torch.Tensor) -> torch.Tensor:
-    """(B, N, 3, 3) the unit vertex normals of (B, N, 3) face ``corners`` of hands with (B, V, 3)
-    ``vertices`` and (F, 3) ``faces`` (what :func:`distance_to_faces` signs with); no gradient."""
+def corner_normals(normals: torch.Tensor, corners: torch.Tensor) -> torch.Tensor:
+    """(B, N, 3, 3) the unit vertex normals of (B, N, 3) face ``corners``, from the hands' (B, V, 3) vertex
+    ``normals`` (:func:`tohgs.geometry.hand_object.vertex_normals`): what :func:`distance_to_faces` signs
+    with; no gradient."""
     with torch.no_grad():
-        normals = vertex_normals(vertices.detach(), faces)
-        return normals[torch.arange(vertices.shape[0], device=vertices.device)[:, None, None], corners]
+        return normals.detach()[torch.arange(normals.shape[0], device=normals.device)[:, None, None], corners]
 
 
 def distance_to_faces(points: torch.Tensor, vertices: torch.Tensor, corners: torch.Tensor,
@@ -153,7 +153,11 @@ def signed_surface_distance(points: torch.Tensor, vertices: torch.Tensor, faces:
     that keeps the faces between searches calls :func:`closest_faces`, :func:`corner_normals` and
     :func:`distance_to_faces` itself."""
     corners = closest_faces(points, vertices, faces, rings, idx)
-    return distance_to_faces(points, vertices, corners, corner_normals(vertices, faces, corners) if signed else None)
+    if not signed:
+        return distance_to_faces(points, vertices, corners)
+    with torch.no_grad():
+        normals = vertex_normals(vertices.detach(), faces)
+    return distance_to_faces(points, vertices, corners, corner_normals(normals, corners))
 
 
 def barycentric(q: torch.Tensor, a: torch.Tensor, b: torch.Tensor, c: torch.Tensor) -> torch.Tensor:

@@ -159,13 +159,14 @@ def solver_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, ta
             nearest["hand"] = idx_h = nearest_index(points, out.vertices)
             with torch.no_grad():  # the normals only decide which points are inside: kept with the index
                 normals = vertex_normals(out.vertices.detach(), hand.closed_faces)
-                nearest["normal"] = torch.gather(normals, 1, idx_h[..., None].expand(-1, -1, 3))
                 if surface:  # the face of each point's closest surface point, and its corners' normals
                     near = distance_to_vertices(points, out.vertices, idx_h) < NEAR_HAND
                     nearest["near"] = near.to(points.dtype)
                     nearest["hand_faces"] = closest_faces(points, out.vertices, hand.closed_faces, nearest["rings"],
                                                           idx_h, near)
-                    nearest["hand_normals"] = corner_normals(out.vertices, hand.closed_faces, nearest["hand_faces"])
+                    nearest["hand_normals"] = corner_normals(normals, nearest["hand_faces"])
+                else:  # the nearest vertex's normal
+                    nearest["normal"] = torch.gather(normals, 1, idx_h[..., None].expand(-1, -1, 3))
         if surface:
             sd = distance_to_faces(points, out.vertices, nearest["hand_faces"], nearest["hand_normals"])
             depth_beyond = nearest["near"] * (-sd - 1e-3).clamp_min(0)
