@@ -113,6 +113,11 @@ def test_the_adaptation_lowers_its_energy_and_keeps_the_joints_in_their_limits(h
     assert h_kept["energy"][-1] < 1.25 * history["energy"][-1], (h_kept["energy"][-1], history["energy"][-1])
     with pytest.raises(ValueError, match="search_every"):
         TTASettings(search_every=0)
+    # the record of touching hands: all four start in the ball; a hand 10 cm away touches nothing
+    assert history["touching"][0] == 1.0 and 0.0 <= history["touching"][-1] <= 1.0
+    away = g.clone()
+    away[:, 0] += 0.1
+    assert tta_energy(hand, away, pts.expand(4, -1, -1), net, 100.0, s)["touching"].tolist() == [0.0] * 4
 
 
 CVAE = {"object_mlp": [32, 64], "hand_mlp": [32, 64], "encoder": [64], "decoder": [64], "latent": 8}

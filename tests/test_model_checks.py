@@ -49,3 +49,50 @@ def test_a_per_point_denoiser_scores_true_and_permuted_maps_alike(built):
     oracle_maps["x0"] = 2 * Batch.collate([data[i] for i in idx]).contact - 1
     r = permuted_map_gap(oracle, data, n_samples=64)
     assert r["gap"] > 1.0, r
+
+
+def test_roughness_tells_regions_from_salt_and_pepper(built):
+    from tohgs.models.checks import map_roughness
+
+    tmp = built[0]
+    item = MapDataset([tmp / "shard-0.zarr"], per="grasp")[0]
+    points = torch.as_tensor(item["points"])
+    true = torch.as_tensor(item["contact"])[None]
+    g = torch.Generator().manual_seed(0)
+    shuffled = true[:, torch.randperm(true.shape[1], generator=g)]  # the same values, anywhere
+    assert map_roughness(true, points).item() * 2 < map_roughness(shuffled, points).item()
+    assert map_roughness(torch.full_like(true, 0.7), points).item() < 1e-6
+
+
+def test_local_mixing_reads_the_neighbours_values(built):
+    """With ``local_k`` a point's output depends on its nearest points' noisy values (and not on far ones
+    through that path); without it, a network whose attention is switched off reads only its own."""
+    from tohgs.data.batch import Batch
+    from tohgs.models.contact_diffuser import nearest_neighbours
+
+    tmp = built[0]
+    batch = Batch.collate([MapDataset([tmp / "shard-0.zarr"], per="grasp")[0]])
+    torch.manual_seed(0)
+    model = ContactDiffuser(ContactDiffuserConfig(d_model=16, n_blocks=1, local_k=8, pointnet=SMALL_PN)).eval()
+    cond = model.batch_condition(batch)
+    assert cond.neighbours is not None and cond.neighbours.shape == (1, batch.points.shape[1], 8)
+    assert torch.equal(cond.neighbours, nearest_neighbours(batch.points, 8))
+    assert not (cond.neighbours == torch.arange(batch.points.shape[1])[None, :, None]).any()  # itself excluded
+    for layer in model.attn:  # only the local path connects the points
+        layer.forward = lambda h, *a, **k: h
+    x = torch.zeros(1, batch.points.shape[1])
+    t = torch.tensor([10])
+    base = model(x, t, cond)
+    i, j = 0, int(cond.neighbours[0, 0, 0])
+    far = int(torch.cdist(batch.points[0, :1], batch.points[0]).argmax())
+    nudged = x.clone(); nudged[0, j] = 1.0
+    assert (model(nudged, t, cond)[0, i] - base[0, i]).abs() > 1e-6  # a neighbour's value reaches it
+    moved = x.clone(); moved[0, far] = 1.0
+    if far not in cond.neighbours[0, 0].tolist():
+        assert torch.equal(model(moved, t, cond)[0, i], base[0, i])  # a far point's does not
+    plain = ContactDiffuser(ContactDiffuserConfig(d_model=16, n_blocks=1, pointnet=SMALL_PN)).eval()
+    for layer in plain.attn:
+        layer.forward = lambda h, *a, **k: h
+    pc = plain.batch_condition(batch)
+    assert pc.neighbours is None
+    assert torch.equal(plain(nudged, t, pc)[0, i], plain(x, t, pc)[0, i])

@@ -40,6 +40,7 @@ from tohgs.hand.model import HandModel, HandOutput
 from tohgs.models.contact_net import ObjectCache
 
 OFFICIAL_POINTS = 3000  # the official code's object points: the point sums are scaled to this many
+TOUCH = 0.005  # m: a hand with an object point this near one of its vertices touches the object (recorded)
 
 
 @dataclass(frozen=True)
@@ -119,7 +120,9 @@ def tta_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, conta
     given: it does not change while the hands move).
 
     ``nearest``: (B, N) each point's kept nearest hand vertex (module docstring); searched when not given.
-    The returned dict holds the one used under ``"nearest"``, without gradient. ``sizes``: the hands of
+    The returned dict holds the one used under ``"nearest"``, without gradient, and under ``"touching"``
+    (B,) 1 where some object point is within :data:`TOUCH` of its kept nearest vertex (not part of the energy:
+    a record of hands the adaptation pushes off the object). ``sizes``: the hands of
     each problem when several are solved together (:func:`pose_problems`).
 
     ContactNet's map runs through its cached first layer (:meth:`~tohgs.models.contact_net.ContactNet.predict_map_cached`,
@@ -148,7 +151,10 @@ def tta_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, conta
     contact = 7500.0 * (close * d_candidates**2).sum(-1) / close.sum(-1).clamp_min(1.0)
     terms = {"contact": settings.w_contact * contact, "consistency": settings.w_consistency * consistency,
              "penetration": settings.w_penetration * penetration}
-    return {**terms, "energy": terms["contact"] + terms["consistency"] + terms["penetration"], "nearest": idx.detach()}
+    with torch.no_grad():
+        touching = (distance_to_vertices(points, verts, idx).min(-1).values < TOUCH).float()
+    return {**terms, "energy": terms["contact"] + terms["consistency"] + terms["penetration"], "nearest": idx.detach(),
+            "touching": touching}
 
 
 def adapt(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_net, alpha: float,

@@ -13,7 +13,9 @@ Keys of the method block:
 The prediction settings ``tta`` (:class:`tohgs.grasps.tta.TTASettings`) are this kind's. The hands of
 ``chunk`` configurations are adapted as one batch, each configuration's maps and coarse grasps drawn from
 its own streams first (the same grasps as one configuration at a time). Per configuration the mean energy
-before and after the adaptation is recorded. Where the generator reads no
+before and after the adaptation is recorded, and the share of its hands that touch the object (a vertex
+within 5 mm of an object point, :data:`tohgs.grasps.tta.TOUCH`) before and after: the adaptation's
+penetration term can push a hand that enters the object from one side off it (docs/results.md, issue 39). Where the generator reads no
 map, the stored contact maps are ContactNet's for the adapted hands (what the adaptation aimed at).
 """
 
@@ -90,7 +92,8 @@ class GraspTTA(Method):
                 net_maps[j] = m
         for j, ((i, _, contact, _, seconds), g, history) in enumerate(zip(staged, grasp.split(sizes), histories)):
             maps = net_maps[j] if contact is None else contact
-            info = {"energy_start": history["energy"][0], "energy_end": history["energy"][-1]}
+            info = {"energy_start": history["energy"][0], "energy_end": history["energy"][-1],
+                    "touching_start": history["touching"][0], "touching_end": history["touching"][-1]}
             out[i] = Prediction(maps.cpu().numpy().astype(np.float32), g.cpu().numpy().astype(np.float64),
                                 {**seconds, "adaptation": share}, info=info)
         return out

@@ -9,7 +9,8 @@
   value and the map's histogram and breaks only where the values lie: a denoiser that reads only each
   point's own value (per-point marginals) has the same loss on both; one that learnt where contact lies on
   the object, and that it comes in regions, does worse on the permuted maps.
-- :func:`contact_fit`: ContactDiffuser's maps against the configuration's ground-truth maps (IoU).
+- :func:`contact_fit`: ContactDiffuser's maps against the configuration's ground-truth maps (IoU), and how
+  rough they are against the truth (:func:`map_roughness`).
 - :func:`representation_fit`: ContactGen's (and ContactCVAE's) sampled representations against the
   configuration's true ones: the contact IoU as :func:`contact_fit`, how alike its samples are (a collapsed
   latent draws one map), the part labels' histogram over the contact points against the truth's, and each
@@ -39,6 +40,7 @@ from tohgs.data.batch import Batch
 from tohgs.models import CHECKED_KINDS
 from tohgs.models.checkpoint import load_component
 from tohgs.models.diffusion import sample
+from tohgs.models.contact_diffuser import nearest_neighbours
 from tohgs.models.grasp_diffuser import GraspCondition
 
 log = logging.getLogger(__name__)
@@ -243,6 +245,14 @@ def _other_config_ious(data: MapDataset, by_config: dict, key: tuple[int, int], 
     return _iou(other, true).max(-1).values.tolist()
 
 
+def map_roughness(maps: torch.Tensor, points: torch.Tensor, k: int = 8) -> torch.Tensor:
+    """(S,) roughness of (S, N) maps on one object's (N, 3) points: the mean over the points of the absolute
+    difference between a point's value and the mean of its ``k`` nearest points' values. A map of coherent
+    regions changes only at their borders; salt and pepper changes everywhere."""
+    nb = nearest_neighbours(points[None], k)[0]  # (N, k)
+    return (maps - maps[:, nb].mean(-1)).abs().mean(-1)
+
+
 @torch.no_grad()
 def contact_fit(model, data: MapDataset, max_configs: int = 24, samples: int = 4, steps: int = 20,
                 sampler: str = "ddim", threshold: float = 0.5, seed: int = 0) -> dict:
@@ -257,12 +267,13 @@ def contact_fit(model, data: MapDataset, max_configs: int = 24, samples: int = 4
 
     Returns:
         ``iou_median`` (sampled maps), ``other_config_iou_median`` (other configurations' maps, where the
-        object has another configuration) and ``contact_fraction`` (the sampled maps' mean share of
-        points in contact; the ground truth's as ``true_contact_fraction``).
+        object has another configuration), ``contact_fraction`` (the sampled maps' mean share of
+        points in contact; the ground truth's as ``true_contact_fraction``) and ``roughness`` (the sampled
+        maps' mean :func:`map_roughness`; the ground truth's as ``true_roughness``).
     """
     g = torch.Generator().manual_seed(seed)
     by_config, keys = _configurations(data, max_configs)
-    ious, base, frac, true_frac = [], [], [], []
+    ious, base, frac, true_frac, rough, true_rough = [], [], [], [], [], []
     for key in keys:
         items = [data[i] for i in by_config[key]]
         true = torch.as_tensor(np.stack([it["contact"] for it in items])) > threshold
@@ -274,14 +285,19 @@ def contact_fit(model, data: MapDataset, max_configs: int = 24, samples: int = 4
         d_g = torch.as_tensor(it["d_goal"])[None].expand(samples, -1)
         cond = model.condition(pts, nrm, d_i, d_g)
         x = sample(lambda xt, tt: model(xt, tt, cond), (samples, pts.shape[1]), model.diffusion, sampler, steps, g)
-        pred = (x.clamp(-1, 1) + 1) / 2 > threshold
+        values = (x.clamp(-1, 1) + 1) / 2
+        pred = values > threshold
         ious += _iou(pred, true).max(-1).values.tolist()
         frac.append(float(pred.float().mean()))
         true_frac.append(float(true.float().mean()))
+        pts0 = torch.as_tensor(it["points"])
+        rough += map_roughness(values, pts0).tolist()
+        true_rough += map_roughness(torch.as_tensor(np.stack([i["contact"] for i in items])), pts0).tolist()
+    mean = lambda v: float(np.mean(v)) if v else math.nan  # noqa: E731
     return {"configs": len(keys), "iou_median": float(np.median(ious)) if ious else math.nan,
             "other_config_iou_median": float(np.median(base)) if base else math.nan,
-            "contact_fraction": float(np.mean(frac)) if frac else math.nan,
-            "true_contact_fraction": float(np.mean(true_frac)) if true_frac else math.nan}
+            "contact_fraction": mean(frac), "true_contact_fraction": mean(true_frac),
+            "roughness": mean(rough), "true_roughness": mean(true_rough)}
 
 
 @torch.no_grad()

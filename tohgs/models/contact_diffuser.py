@@ -5,6 +5,12 @@ One token per object point carries the noisy contact value ``x = 2 c - 1``. Poin
 block as the positional embedding, with the timestep embedding. Each block is a residual MLP block followed
 by a self-attention transformer layer over the points. The network predicts epsilon.
 
+With ``local_k`` > 0 every block also mixes each point's token with its ``local_k`` nearest object points'
+tokens (:class:`LocalMix`, the mean and the max of the neighbours' tokens less its own): a denoiser that sees
+its neighbours' noisy values can keep contact in regions, where global attention alone, at the laptop's
+width and depth, denoised nearly point by point (docs/results.md, issue 39). The official model gets its
+local context from PointNet++ in every block; ``local_k: 0`` (config/paper.yaml) is that architecture.
+
 Shapes: points (B, N, 3) m, normals (B, N, 3), d_init / d_goal / contact (B, N) in [0, 1].
 """
 
@@ -19,20 +25,22 @@ from tohgs.data.batch import Batch
 from tohgs.models.component import Component
 from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, TimeMLP, sample
 from tohgs.models.guidance import GuidanceSettings, contact_guidance_step, near_scene_weights
-from tohgs.models.pointnet2 import PointNet2, PointNet2Config
+from tohgs.models.pointnet2 import PointNet2, PointNet2Config, gather
 
 
 @dataclass(frozen=True)
 class ContactDiffuserConfig:
     """Sizes (paper: d_model 256, 8 blocks, 4 heads, PointNet++ 512 + 512). The official model has about
     16.9 M parameters; this one at config/paper.yaml's sizes has 12.7 M (a GELU feed-forward instead of
-    GEGLU)."""
+    GEGLU). ``local_k`` (0: the official architecture) adds :class:`LocalMix` to every block; the laptop
+    default's components set 16 (workflow/schemas/config.schema.yaml)."""
 
     d_model: int = 64
     n_blocks: int = 2
     n_heads: int = 4
     ff_mult: int = 2
     dropout: float = 0.0
+    local_k: int = 0
     pointnet: dict = field(default_factory=lambda: {
         "sa": [[128, 0.02, 16, [32, 32, 64]], [32, 0.05, 16, [64, 64, 128]], [0, 0.0, 0, [128, 128]]],
         "fp": [[128], [96], [64]]})
@@ -53,6 +61,42 @@ class ResBlock(nn.Module):
 
     def forward(self, x: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
         return x + self.net(x + cond)
+
+
+class LocalMix(nn.Module):
+    """A residual update of each point's token from its k nearest points' tokens: LayerNorm, then the
+    neighbours' mean and max less the point's own token, through Linear -> GELU -> Linear."""
+
+    def __init__(self, d: int):
+        super().__init__()
+        self.norm = nn.LayerNorm(d)
+        self.net = nn.Sequential(nn.Linear(2 * d, d), nn.GELU(), nn.Linear(d, d))
+
+    def forward(self, h: torch.Tensor, neighbours: torch.Tensor) -> torch.Tensor:
+        """(B, N, d) tokens and (B, N, k) neighbour indices -> (B, N, d)."""
+        x = self.norm(h)
+        nb = gather(x, neighbours)  # (B, N, k, d)
+        return h + self.net(torch.cat([nb.mean(2) - x, nb.max(2).values - x], -1))
+
+
+@dataclass(frozen=True)
+class ContactCondition:
+    """What the network reads of one batch of scene-aware object clouds (B of them, N points).
+
+    Attributes:
+        embedding: (B, N, d_model) the positional embedding added inside every block.
+        neighbours: (B, N, k) each point's k nearest points (itself excluded), or None (``local_k`` 0).
+    """
+
+    embedding: torch.Tensor
+    neighbours: torch.Tensor | None
+
+
+def nearest_neighbours(points: torch.Tensor, k: int) -> torch.Tensor:
+    """(B, N, k) indices of each of (B, N, 3) points' k nearest other points (Euclidean)."""
+    d = torch.cdist(points, points)
+    d.diagonal(dim1=1, dim2=2).fill_(float("inf"))
+    return d.topk(k, dim=-1, largest=False).indices
 
 
 class ContactDiffuser(Component):
@@ -78,26 +122,31 @@ class ContactDiffuser(Component):
         self.attn = nn.ModuleList([nn.TransformerEncoderLayer(d, cfg.n_heads, cfg.ff_mult * d, cfg.dropout,
                                                               activation="gelu", batch_first=True, norm_first=True)
                                    for _ in range(cfg.n_blocks)])
+        self.local = nn.ModuleList([LocalMix(d) for _ in range(cfg.n_blocks)]) if cfg.local_k > 0 else None
         self.out = nn.Sequential(nn.LayerNorm(d), nn.Linear(d, 1))
 
     def condition(self, points: torch.Tensor, normals: torch.Tensor, d_init: torch.Tensor, d_goal: torch.Tensor
-                  ) -> torch.Tensor:
-        """(B, N, d_model) positional embedding from the scene-aware object cloud (computed once per sample)."""
+                  ) -> ContactCondition:
+        """The :class:`ContactCondition` of the scene-aware object cloud (computed once per sample)."""
         feats = torch.cat([normals, d_init[..., None], d_goal[..., None]], -1)
         local, glob = self.backbone(points, feats)
-        return self.pos(torch.cat([local, glob[:, None].expand(-1, local.shape[1], -1)], -1))
+        emb = self.pos(torch.cat([local, glob[:, None].expand(-1, local.shape[1], -1)], -1))
+        k = min(self.cfg.local_k, points.shape[1] - 1)
+        return ContactCondition(emb, nearest_neighbours(points, k) if self.local is not None and k > 0 else None)
 
-    def forward(self, x_t: torch.Tensor, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+    def forward(self, x_t: torch.Tensor, t: torch.Tensor, cond: ContactCondition) -> torch.Tensor:
         """Predict epsilon (B, N) from noisy contact values ``x_t`` (B, N), timesteps (B,) and the
-        embedding of :meth:`condition`."""
-        c = cond + self.time(t)[:, None]
+        :meth:`condition`."""
+        c = cond.embedding + self.time(t)[:, None]
         h = self.inp(x_t[..., None])
-        for res, attn in zip(self.res, self.attn):
+        for i, (res, attn) in enumerate(zip(self.res, self.attn)):
             h = res(h, c)
+            if cond.neighbours is not None:
+                h = self.local[i](h, cond.neighbours)
             h = attn(h + c)
         return self.out(h)[..., 0]
 
-    def batch_condition(self, batch: Batch) -> torch.Tensor:
+    def batch_condition(self, batch: Batch) -> ContactCondition:
         """:meth:`condition` of a batch's object cloud and distance maps."""
         return self.condition(batch.points, batch.normals, batch.d_init, batch.d_goal)
 
