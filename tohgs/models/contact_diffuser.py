@@ -3,7 +3,8 @@
 One token per object point carries the noisy contact value ``x = 2 c - 1``. PointNet++ on xyz with
 (normal, D_init, D_goal) gives per-point local and global features; projected, they are added inside every
 block as the positional embedding, with the timestep embedding. Each block is a residual MLP block followed
-by a self-attention transformer layer over the points. The network predicts epsilon.
+by a self-attention transformer layer over the points. The network predicts epsilon (the official code), or
+the clean map x0 with ``diffusion.prediction: sample`` (the laptop default's components).
 
 With ``local_k`` > 0 every block also mixes each point's token with its ``local_k`` nearest object points'
 tokens (:class:`LocalMix`, the mean and the max of the neighbours' tokens less its own): a denoiser that sees
@@ -100,7 +101,7 @@ def nearest_neighbours(points: torch.Tensor, k: int) -> torch.Tensor:
 
 
 class ContactDiffuser(Component):
-    """Epsilon-prediction network over per-point contact values (a contact source: :meth:`sample_contact`)."""
+    """Denoising network over per-point contact values (a contact source: :meth:`sample_contact`)."""
 
     kind = "contact_diffuser"
     Config = ContactDiffuserConfig
@@ -135,8 +136,8 @@ class ContactDiffuser(Component):
         return ContactCondition(emb, nearest_neighbours(points, k) if self.local is not None and k > 0 else None)
 
     def forward(self, x_t: torch.Tensor, t: torch.Tensor, cond: ContactCondition) -> torch.Tensor:
-        """Predict epsilon (B, N) from noisy contact values ``x_t`` (B, N), timesteps (B,) and the
-        :meth:`condition`."""
+        """Predict epsilon, or x0 (B, N) (``diffusion.prediction``), from noisy contact values ``x_t`` (B, N),
+        timesteps (B,) and the :meth:`condition`."""
         c = cond.embedding + self.time(t)[:, None]
         h = self.inp(x_t[..., None])
         for i, (res, attn) in enumerate(zip(self.res, self.attn)):
