@@ -111,6 +111,12 @@ def object_caches(contact_net, points: torch.Tensor, sizes: list[int] | None = N
     return ObjectCache(*parts)
 
 
+def _map_value_at(alpha: float, r: float) -> torch.Tensor:
+    """The contact map ``1 - 2 (sigmoid(alpha d) - 0.5)`` at distance ``r`` (m): a point is nearer than ``r``
+    to its vertex exactly where the map exceeds this value (the map falls with the distance)."""
+    return 1.0 - 2.0 * (torch.sigmoid(torch.tensor(alpha * r)) - 0.5)
+
+
 def tta_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_net, alpha: float,
                settings: TTASettings, object_features=None, nearest: torch.Tensor | None = None,
                sizes: list[int] | None = None) -> dict[str, torch.Tensor]:
@@ -146,13 +152,12 @@ def tta_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, conta
     inside, offset = inside_hand(points, verts, normals, idx)
     penetration = 120.0 * scale * (inside * (offset**2).sum(-1)).sum(-1)
     d_candidates, _ = nearest_vertex(points, verts[:, hand.contact_ids])
-    with torch.no_grad():  # the map is 1 - 2 (sigmoid(alpha d) - 0.5): d < r where the map exceeds its value at r
-        close = (c_hand > 1.0 - 2.0 * (torch.sigmoid(torch.tensor(alpha * settings.contact_radius)) - 0.5)).float()
+    with torch.no_grad():
+        close = (c_hand > _map_value_at(alpha, settings.contact_radius)).float()
+        touching = (c_hand.max(-1).values > _map_value_at(alpha, TOUCH)).float()
     contact = 7500.0 * (close * d_candidates**2).sum(-1) / close.sum(-1).clamp_min(1.0)
     terms = {"contact": settings.w_contact * contact, "consistency": settings.w_consistency * consistency,
              "penetration": settings.w_penetration * penetration}
-    with torch.no_grad():
-        touching = (distance_to_vertices(points, verts, idx).min(-1).values < TOUCH).float()
     return {**terms, "energy": terms["contact"] + terms["consistency"] + terms["penetration"], "nearest": idx.detach(),
             "touching": touching}
 

@@ -276,7 +276,8 @@ def contact_fit(model, data: MapDataset, max_configs: int = 24, samples: int = 4
     ious, base, frac, true_frac, rough, true_rough = [], [], [], [], [], []
     for key in keys:
         items = [data[i] for i in by_config[key]]
-        true = torch.as_tensor(np.stack([it["contact"] for it in items])) > threshold
+        true_values = torch.as_tensor(np.stack([it["contact"] for it in items]))
+        true = true_values > threshold
         base += _other_config_ious(data, by_config, key, true, threshold)
         it = items[0]
         pts = torch.as_tensor(it["points"])[None].expand(samples, -1, -1)
@@ -290,9 +291,9 @@ def contact_fit(model, data: MapDataset, max_configs: int = 24, samples: int = 4
         ious += _iou(pred, true).max(-1).values.tolist()
         frac.append(float(pred.float().mean()))
         true_frac.append(float(true.float().mean()))
-        pts0 = torch.as_tensor(it["points"])
-        rough += map_roughness(values, pts0).tolist()
-        true_rough += map_roughness(torch.as_tensor(np.stack([i["contact"] for i in items])), pts0).tolist()
+        both = map_roughness(torch.cat([values, true_values.to(values)]), torch.as_tensor(it["points"]))
+        rough += both[:samples].tolist()
+        true_rough += both[samples:].tolist()
     mean = lambda v: float(np.mean(v)) if v else math.nan  # noqa: E731
     return {"configs": len(keys), "iou_median": float(np.median(ious)) if ious else math.nan,
             "other_config_iou_median": float(np.median(base)) if base else math.nan,
