@@ -44,7 +44,8 @@ class _Data:
     def __init__(self, items: list[dict]):
         self.items = items
         grasps = np.stack([it["grasp"] for it in items])
-        self.shards = [SimpleNamespace(attrs={"alpha_contact": 100.0}, grasp=grasps, n_grasps=len(grasps))]
+        self.shards = [SimpleNamespace(attrs={"alpha_contact": 100.0}, alpha_contact=100.0, grasp=grasps,
+                                       n_grasps=len(grasps))]
 
     def __len__(self) -> int:
         return len(self.items)

@@ -31,6 +31,22 @@ def test_ball_query_returns_only_neighbours_within_the_radius():
     assert ball_query(0.1, 4, xyz, far).unique().numel() == 1
 
 
+def test_ball_query_takes_the_lowest_indices_within_the_radius_in_order():
+    # brute force: each centre's in-radius indices ascending, the first nsample, a short list padded with its
+    # first entry, an empty one with the nearest point
+    g = torch.Generator().manual_seed(2)
+    xyz = torch.rand(2, 300, 3, generator=g)
+    centres = torch.cat([xyz[:, :20], torch.full((2, 1, 3), 3.0)], 1)
+    for radius, k in ((0.05, 16), (0.12, 8), (0.3, 32)):
+        idx = ball_query(radius, k, xyz, centres)
+        d2 = torch.cdist(centres, xyz) ** 2
+        for b in range(2):
+            for s in range(centres.shape[1]):
+                inside = torch.nonzero(d2[b, s] <= radius**2).flatten()[:k].tolist()
+                inside = inside or [int(d2[b, s].argmin())]
+                assert idx[b, s].tolist() == inside + [inside[0]] * (k - len(inside))
+
+
 def test_backbone_shapes_gradients_and_translation_invariance():
     torch.manual_seed(0)
     cfg = PointNet2Config(in_channels=2, sa=((64, 0.05, 8, (16, 32)), (16, 0.1, 8, (32, 64)), (0, 0.0, 0, (64, 96))),
