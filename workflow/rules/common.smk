@@ -22,6 +22,11 @@ from tohgs.methods import method_components, of_chain
 from tohgs.models import CHECKED_KINDS
 from tohgs.models.guidance_settings import GuidanceSettings
 from tohgs.settings import settings_from
+from tohgs.scheduler_timers import coalesce_scheduler_timers
+
+# One pending re-scheduling timer instead of a chain per job event (tohgs/scheduler_timers.py): the
+# scheduler's passes no longer pile up over a long run, and the run ends with its last job.
+coalesce_scheduler_timers()
 
 _SCHEMA = load_schema()
 try:
