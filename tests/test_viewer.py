@@ -61,7 +61,7 @@ def test_the_camera_looks_at_the_target_from_the_open_side():
     eye, look = camera_for("shelving", [np.array([0.2, 0.3, 0.5])])
     assert np.allclose(look, [0.2, 0.3, 0.5]) and eye[1] < look[1]  # from the open front (-y)
     eye, look = camera_for("placing", [np.zeros(3), np.array([1.0, 0.0, 0.0])])
-    assert np.allclose(look, [0.5, 0, 0]) and np.linalg.norm(eye - look) >= 1.4  # both targets in view
+    assert np.allclose(look, [0.5, 0, 0]) and np.linalg.norm(eye - look) >= 1.4 - 1e-9  # both targets in view (1.4 x their spread, rounded)
 
 
 def test_a_large_mesh_is_decimated_once_for_the_export_and_keeps_its_shape():
