@@ -72,6 +72,8 @@ def test_defaults_are_filled_in_place():
         ({"tables": {"t2": {"rows": ["ours"], "columns": ["tss"]}}}, "tables.t2.columns.0", "is not one of"),
         ({"figures": {"contact_methods": ["ours", "oracle"]}}, "figures.contact_methods", "is not a method"),
         ({"figures": {"methods": ["ours", "oracle"]}}, "figures.methods", "is not a method"),
+        ({"evaluation": {"palm_sd": ["ours", "oracle"]}}, "evaluation.palm_sd", "is not a method"),
+        ({"evaluation": {"palm_sd": "ours"}}, "evaluation.palm_sd", "expected ['boolean', 'array']"),
         ({"methods": {"grasptta": {"contact_net": "contact_diffuser"}}}, "methods.grasptta.contact_net",
          "must be a hand_contact component"),
         ({"methods": {"grasptta": {"contact": "nothing"}}}, "methods.grasptta.contact", "is not a component"),

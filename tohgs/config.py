@@ -341,10 +341,13 @@ def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -
             if m not in cfg["methods"]:
                 raise ConfigError(f"config key 'claims.{name}': {m!r} is not a method (methods: "
                                   f"{', '.join(sorted(cfg['methods']))})")
-    for m in cfg["evaluation"]["robust_sd"]["methods"]:
-        if m not in cfg["methods"]:
-            raise ConfigError(f"config key 'evaluation.robust_sd.methods': {m!r} is not a method (methods: "
-                              f"{', '.join(sorted(cfg['methods']))})")
+    palm = cfg["evaluation"]["palm_sd"]
+    for key, methods in (("robust_sd.methods", cfg["evaluation"]["robust_sd"]["methods"]),
+                         ("palm_sd", [] if isinstance(palm, bool) else palm)):
+        for m in methods:
+            if m not in cfg["methods"]:
+                raise ConfigError(f"config key 'evaluation.{key}': {m!r} is not a method (methods: "
+                                  f"{', '.join(sorted(cfg['methods']))})")
     named = {key: cfg["figures"][key] for key in ("methods", "contact_methods")}
     named.update({f"comparisons.{k}": v for k, v in cfg["figures"].get("comparisons", {}).items()})
     for key, methods in named.items():

@@ -375,6 +375,13 @@ def robust_sd_settings(wildcards):
     return _canonical({k: v for k, v in block.items() if k != "methods"})
 
 
+def palm_sd_of(wildcards):
+    """Whether the method's evaluation simulates SD out of the palm: ``evaluation.palm_sd`` true, or a list
+    that names the method (or the method a seed replica is of)."""
+    palm = config["evaluation"]["palm_sd"]
+    return palm if isinstance(palm, bool) else BASE_OF.get(wildcards.method, wildcards.method) in palm
+
+
 def method_models(wildcards):
     """The checkpoints of the method's components for the task."""
     return [f"results/models/{wildcards.task}/{c}.pt" for c in components_of(wildcards.method)]

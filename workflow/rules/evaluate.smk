@@ -18,7 +18,7 @@ rule evaluate:
         voxel_pitch=setting("metrics", "voxel_pitch"),
         cache_dir=setting("cache_dir"),
         robust_sd=robust_sd_settings,
-        palm_sd=setting("evaluation", "palm_sd"),
+        palm_sd=palm_sd_of,
         pv_mesh=setting("evaluation", "pv_mesh"),
     threads: config["evaluation"]["threads"]
     resources:
