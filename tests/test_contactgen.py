@@ -175,6 +175,50 @@ def test_kept_correspondences_solve_as_well_as_searching_every_step(built):  # n
         SolverSettings(search_every=0)
 
 
+def test_the_surface_terms_on_their_counting_points_equal_the_terms_over_every_point(built):  # noqa: F811
+    """The solver measures the contact term's distances only for entries of non-zero weight and the
+    penetration depths only for points near the hand; the energies and their gradients are those of the
+    same terms over every point (the dense form, written out here), bit for bit."""
+    from tohgs.geometry.hand_object import distance_to_vertices, nearest_index, vertex_normals
+    from tohgs.geometry.surface_distance import closest_faces, corner_normals, distance_to_faces
+    from tohgs.geometry.surface_distance import vertex_rings
+    from tohgs.grasps.contactgen_solver import (CONTACTGEN_POINTS, NEAR_HAND, RING_WIDTH, contact_points,
+                                                nearest_part_vertex, part_table, solver_energy)
+
+    tmp, hand, _, _, _ = built
+    data = MapDataset([tmp / "shard-0.zarr"], per="grasp")
+    batch = Batch.collate([data.item(i, 0) for i in range(len(data))])
+    target = representation_of(hand, batch.grasp, batch.points, 100.0)
+    s = SolverSettings(min_contact=0.3, max_contact_points=64)
+    sel = contact_points(target.contact, s)
+    assert (sel[1] == 0).any() and (sel[1] > 0).any()  # both kinds of entries
+    grasp = perturb_grasps(batch.grasp, (0.01, 0.1, 0.1), torch.Generator().manual_seed(5)).requires_grad_(True)
+    terms = solver_energy(hand, grasp, batch.points, target, s, "pose", sel)
+    # the dense form: every selected entry's and every point's distance, the ones that do not count times 0
+    idx, weight = sel
+    out = hand(grasp)
+    pts = batch.points
+    scale = CONTACTGEN_POINTS / pts.shape[1]
+    rings = vertex_rings(hand.closed_faces, hand.rest_vertices.shape[0], RING_WIDTH)
+    sel_pts = torch.gather(pts, 1, idx[..., None].expand(-1, -1, 3))
+    part = nearest_part_vertex(sel_pts, torch.gather(target.part, 1, idx), out.vertices, part_table(hand.part_labels))
+    d_part = distance_to_faces(sel_pts, out.vertices, closest_faces(sel_pts, out.vertices, hand.closed_faces, rings, part))
+    contact = s.w_contact * scale * (weight * d_part).sum(-1)
+    idx_h = nearest_index(pts, out.vertices)
+    near = distance_to_vertices(pts, out.vertices, idx_h) < NEAR_HAND
+    assert near.any() and not near.all()
+    faces = closest_faces(pts, out.vertices, hand.closed_faces, rings, idx_h, near)
+    normals = corner_normals(vertex_normals(out.vertices.detach(), hand.closed_faces), faces)
+    sd = distance_to_faces(pts, out.vertices, faces, normals)
+    penetration = s.w_penetration * scale * (near.to(pts.dtype) * (-sd - 1e-3).clamp_min(0)).sum(-1)
+    assert (terms["penetration"] > 0).any()  # the perturbed hands press into their objects
+    for name, dense in (("contact", contact), ("penetration", penetration)):
+        assert torch.equal(terms[name], dense), name
+        (g_sparse,) = torch.autograd.grad(terms[name].sum(), grasp, retain_graph=True)
+        (g_dense,) = torch.autograd.grad(dense.sum(), grasp, retain_graph=True)
+        assert torch.equal(g_sparse, g_dense), name
+
+
 def test_the_ground_truth_gate_solves_the_representation_of_the_datasets_own_grasps(built):  # noqa: F811
     """``model: ground_truth`` (the solver's gate): per configuration the representation of the grasps the
     Dataset row evaluates (ground_truth_pick), solved from the default start; the hands come back near those

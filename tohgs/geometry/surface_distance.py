@@ -125,11 +125,17 @@ def corner_normals(normals: torch.Tensor, corners: torch.Tensor) -> torch.Tensor
 
 
 def distance_to_faces(points: torch.Tensor, vertices: torch.Tensor, corners: torch.Tensor,
-                      normals: torch.Tensor | None = None) -> torch.Tensor:
+                      normals: torch.Tensor | None = None, hands: torch.Tensor | None = None) -> torch.Tensor:
     """(B, N) the distance, m, of (B, N, 3) points to their given faces (``corners`` (B, N, 3) of hands with
     (B, V, 3) ``vertices``), differentiable in both; with ``normals`` (:func:`corner_normals`), signed:
-    negative where the offset from the closest point opposes the corners' normals interpolated there."""
-    cv = vertices[torch.arange(vertices.shape[0], device=vertices.device)[:, None, None], corners]  # (B, N, 3, 3)
+    negative where the offset from the closest point opposes the corners' normals interpolated there.
+
+    ``hands`` (M,): the points are a flat list instead, (M, 3) with (M, 3) ``corners`` (and (M, 3, 3)
+    ``normals``), point ``m`` on hand ``hands[m]``; returns (M,), each value as in the (B, N) form (an
+    optimiser that needs only some points' distances computes just those)."""
+    if hands is None:
+        hands = torch.arange(vertices.shape[0], device=vertices.device)[:, None]
+    cv = vertices[hands[..., None], corners]  # (B, N, 3, 3) or (M, 3, 3)
     q = closest_point_on_triangles(points, cv[..., 0, :], cv[..., 1, :], cv[..., 2, :])
     off = points - q
     dist = (off ** 2).sum(-1).add(1e-12).sqrt()

@@ -122,7 +122,9 @@ def solver_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, ta
 
     ``nearest`` keeps the nearest-vertex indices between calls (``part``: (B, K) of the contact points in
     their parts; ``hand``: (B, N) of every point in the hand, with ``normal`` (B, N, 3) that vertex's
-    outward normal when it was found): they are searched when ``search`` is true or not yet there, and
+    outward normal when it was found; with ``distance: surface`` the faces of the closest surface points
+    instead, kept for the contact points of non-zero weight and the points within ``NEAR_HAND`` of the hand
+    only, the others' terms being 0): they are searched when ``search`` is true or not yet there, and
     reused otherwise (module docstring). ``sizes``: the hands of each problem when several are solved
     together (:func:`tohgs.grasps.tta.pose_problems`)."""
     s = settings
@@ -140,10 +142,13 @@ def solver_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, ta
         if surface:
             if "rings" not in nearest:
                 nearest["rings"] = vertex_rings(hand.closed_faces, hand.rest_vertices.shape[0], RING_WIDTH)
+            nearest["weighted"] = torch.nonzero(weight > 0, as_tuple=True)  # the entries that count
             nearest["part_faces"] = closest_faces(sel_points, out.vertices, hand.closed_faces, nearest["rings"],
-                                                  nearest["part"])
-    if surface:
-        d_part = distance_to_faces(sel_points, out.vertices, nearest["part_faces"])
+                                                  nearest["part"], weight > 0)
+    if surface:  # the distances of the weighted entries only; the others weigh 0
+        rows = nearest["weighted"]
+        d_part = _scatter_rows(distance_to_faces(sel_points[rows], out.vertices, nearest["part_faces"][rows],
+                                                 hands=rows[0]), rows, weight.shape)
     else:
         d_part = distance_to_vertices(sel_points, out.vertices, nearest["part"])
     terms = {"contact": s.w_contact * scale * (weight * d_part).sum(-1)}
@@ -159,17 +164,19 @@ def solver_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, ta
             nearest["hand"] = idx_h = nearest_index(points, out.vertices)
             with torch.no_grad():  # the normals only decide which points are inside: kept with the index
                 normals = vertex_normals(out.vertices.detach(), hand.closed_faces)
-                if surface:  # the face of each point's closest surface point, and its corners' normals
+                if surface:  # the face of each near point's closest surface point, and its corners' normals
                     near = distance_to_vertices(points, out.vertices, idx_h) < NEAR_HAND
-                    nearest["near"] = near.to(points.dtype)
-                    nearest["hand_faces"] = closest_faces(points, out.vertices, hand.closed_faces, nearest["rings"],
-                                                          idx_h, near)
-                    nearest["hand_normals"] = corner_normals(normals, nearest["hand_faces"])
+                    rows = nearest["near"] = torch.nonzero(near, as_tuple=True)
+                    faces = closest_faces(points, out.vertices, hand.closed_faces, nearest["rings"], idx_h, near)
+                    nearest["hand_faces"] = faces[rows]
+                    nearest["hand_normals"] = corner_normals(normals, faces)[rows]
                 else:  # the nearest vertex's normal
                     nearest["normal"] = torch.gather(normals, 1, idx_h[..., None].expand(-1, -1, 3))
-        if surface:
-            sd = distance_to_faces(points, out.vertices, nearest["hand_faces"], nearest["hand_normals"])
-            depth_beyond = nearest["near"] * (-sd - 1e-3).clamp_min(0)
+        if surface:  # the near points' depths; a point farther from the hand is outside it
+            rows = nearest["near"]
+            sd = distance_to_faces(points[rows], out.vertices, nearest["hand_faces"], nearest["hand_normals"],
+                                   hands=rows[0])
+            depth_beyond = _scatter_rows((-sd - 1e-3).clamp_min(0), rows, points.shape[:2])
         else:
             offset = points - torch.gather(out.vertices, 1, nearest["hand"][..., None].expand(-1, -1, 3))
             inside = ((offset * nearest["normal"]).sum(-1) < 0).float()
@@ -179,6 +186,12 @@ def solver_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, ta
         sigma = torch.as_tensor(hand.assets.prior_std, dtype=grasp.dtype, device=grasp.device).clamp_min(1e-3)
         terms["pose"] = s.w_pose * (((grasp[:, 6:] - mu) / sigma) ** 2).sum(-1)
     return {**terms, "energy": sum(terms.values())}
+
+
+def _scatter_rows(values: torch.Tensor, rows: tuple[torch.Tensor, torch.Tensor], shape: torch.Size) -> torch.Tensor:
+    """(B, N) zeros with the (M,) ``values`` at the ``rows`` (hand, point) indices, differentiable in
+    ``values``: the per-point layout the energy sums over, for terms computed on some points only."""
+    return values.new_zeros(shape).index_put(rows, values)
 
 
 def contact_points(contact: torch.Tensor, settings: SolverSettings) -> tuple[torch.Tensor, torch.Tensor]:
