@@ -239,14 +239,16 @@ def test_smoke_run_outputs(smoke_run):
     with_robust = with_grasps.method.isin([labels[m] for m in robust])
     assert with_robust.any() and with_grasps[with_robust].sd_pass.between(0, 100).all()
     assert with_grasps[~with_robust].sd_robust.isna().all()
-    # palm SD (evaluation.palm_sd: Table 1's rows by default): filled for the listed methods' grasps only
+    # palm SD (evaluation.palm_sd: Dataset and Ours by default): filled for the listed methods' grasps only
     for task in cfg["scenes"]["tasks"]:
         for method in ("ours", "m-grasptta-ta"):
             rows = pd.read_parquet(smoke_run / f"results/metrics/{task}/{method}.parquet")
             kept = rows[rows.kept]
             listed = method in cfg["evaluation"]["palm_sd"]
             assert kept.sd_palm.notna().all() if listed else kept.sd_palm.isna().all(), (task, method)
-    assert with_grasps.qr_palm.notna().all()
+    with_palm = with_grasps.method.isin([labels[m] for m in cfg["evaluation"]["palm_sd"]])
+    assert with_palm.any() and with_grasps[with_palm].qr_palm.notna().all()
+    assert with_grasps[~with_palm].qr_palm.isna().all()
     assert len(pd.read_csv(smoke_run / "results/tables/table1_qr_grid.csv")) == 3 * len(methods) * 12
     assert "| Task |" in (smoke_run / "results/tables/table1.md").read_text()
     assert (smoke_run / "results/figures/contact_maps.png").stat().st_size > 20_000
