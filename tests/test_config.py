@@ -231,3 +231,22 @@ def test_the_upright_overlay_adds_an_upright_row_and_leaves_the_faithful_one_in_
         assert {**comps[z]["training"], "rotation": None} == {**comps[so3]["training"], "rotation": None}
         assert comps[z]["training"]["rotation"] == "z" and "rotation" not in comps[so3]["training"]
     assert cfg["tables"]["upright"]["rows"] == ["ours", "ours-upright", "ours-gt-contact"]
+
+
+def test_the_adaptation_overlay_adds_m_grasptta_rows_without_their_adaptation(repo):
+    """config/adaptation.yaml over the default: the two coarse rows are M-GraspTTA (TA) and (GT) with the
+    adaptation's steps at 0 and everything else theirs (the same components, maps and sampling), and the
+    adapted rows keep the default's adaptation."""
+    with open(repo / "config/config.yaml") as fh:
+        cfg = yaml.safe_load(fh)
+    with open(repo / "config/adaptation.yaml") as fh:
+        merge(cfg, yaml.safe_load(fh))
+    cfg = validate_config(cfg, base_dir=repo)
+    methods = cfg["methods"]
+    for source in ("ta", "gt"):
+        coarse, adapted = methods[f"m-grasptta-{source}-coarse"], methods[f"m-grasptta-{source}"]
+        assert coarse["settings"] == {"tta": {"steps": 0}} and not adapted.get("settings")
+        assert {k: v for k, v in coarse.items() if k not in ("label", "settings")} == \
+            {k: v for k, v in adapted.items() if k not in ("label", "settings")}
+    assert cfg["prediction"]["tta"]["steps"] > 0
+    assert cfg["tables"]["adaptation"]["rows"][1::2] == ["m-grasptta-ta", "m-grasptta-gt"]
