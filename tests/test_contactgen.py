@@ -279,3 +279,22 @@ def test_the_representation_check_sees_a_collapsed_contact_latent(built):  # noq
         first.weight[:, -model.cfg.latent:] = 0
     collapsed = representation_fit(model, hand, data, curve, samples=4)
     assert collapsed["sample_iou_median"] == 1.0, collapsed
+
+
+def test_the_representation_check_measures_the_contact_stage_s_reconstruction(built):  # noqa: F811
+    """representation_fit's reconstruction IoU is each true map against the contact stage's posterior-mean
+    reconstruction of it: 1 for a stage that gives the map back, 0 for one that gives nothing back; the
+    sampled values' 99th percentile is reported beside the truth's."""
+    from tohgs.models.checks import representation_fit
+
+    tmp, hand, _, _, _ = built
+    model, _ = prepared_component("contact_gen", CONTACT_GEN, tmp / "shard-0.zarr", hand)
+    model.eval()
+    data = MapDataset([tmp / "shard-0.zarr"], per="grasp")
+    plain = representation_fit(model, hand, data, samples=2)
+    assert 0 <= plain["reconstruction_iou_median"] <= 1 and 0 < plain["contact_p99"] < 1
+    assert 0.5 < plain["true_contact_p99"] <= 1
+    model.reconstruct_contact = lambda batch: batch.contact  # a perfect reconstruction
+    assert representation_fit(model, hand, data, samples=2)["reconstruction_iou_median"] == 1.0
+    model.reconstruct_contact = lambda batch: torch.zeros_like(batch.contact)  # none
+    assert representation_fit(model, hand, data, samples=2)["reconstruction_iou_median"] == 0.0

@@ -245,6 +245,11 @@ def _other_config_ious(data: MapDataset, by_config: dict, key: tuple[int, int], 
     return _iou(other, true).max(-1).values.tolist()
 
 
+def _quantile(parts: list[torch.Tensor], q: float) -> float:
+    """The ``q`` quantile of the values of the 1-D tensors ``parts`` together (NaN when there are none)."""
+    return float(torch.quantile(torch.cat(parts).float(), q)) if parts else math.nan
+
+
 def map_roughness(maps: torch.Tensor, points: torch.Tensor, k: int = 8) -> torch.Tensor:
     """(S,) roughness of (S, N) maps on one object's (N, 3) points: the mean over the points of the absolute
     difference between a point's value and the mean of its ``k`` nearest points' values. A map of coherent
@@ -310,10 +315,14 @@ def representation_fit(model, hand: HandModel, data: MapDataset, curve: list[dic
     Returns:
         ``iou_median`` / ``other_config_iou_median`` / ``contact_fraction`` / ``true_contact_fraction`` as
         :func:`contact_fit`; ``sample_iou_median``, the median IoU between two samples of one configuration
-        (1: the samples are one map); with parts, ``part_tv``, the total variation distance between the
-        part labels' histograms over the sampled and the true contact points (0: the same use of the hand's
-        parts; NaN when the samples have no point in contact), and ``part_agreement``, the share of points in contact in both a sample and its best true
-        map that carry the same part; ``kl_<stage>``, each stage's KL at the last step of ``curve`` (the
+        (1: the samples are one map); ``reconstruction_iou_median``, the median IoU of each true map with the
+        contact stage's posterior-mean reconstruction of it (what the stage can carry: low where it
+        under-fits, whatever its prior), and ``contact_p99`` / ``true_contact_p99``, the 99th percentile of the
+        sampled and the true contact values (a stage that hedges never nears 1); with parts, ``part_tv``, the
+        total variation distance between the part labels' histograms over the sampled and the true contact
+        points (0: the same use of the hand's parts; NaN when the samples have no point in contact), and
+        ``part_agreement``, the share of points in contact in both a sample and its best true map that carry
+        the same part; ``kl_<stage>``, each stage's KL at the last step of ``curve`` (the
         checkpoint's loss curve).
     """
     from tohgs.geometry.contact_parts import N_PARTS, part_contact
@@ -321,7 +330,8 @@ def representation_fit(model, hand: HandModel, data: MapDataset, curve: list[dic
     g = torch.Generator().manual_seed(seed)
     by_config, keys = _configurations(data, max_configs)
     alpha = data.shards[0].alpha_contact
-    ious, base, frac, true_frac, alike, agree = [], [], [], [], [], []
+    ious, base, frac, true_frac, alike, agree, recon = [], [], [], [], [], [], []
+    values, true_values = [], []
     hist_s, hist_t = torch.zeros(N_PARTS), torch.zeros(N_PARTS)
     for key in keys:
         items = [data[i] for i in by_config[key]]
@@ -334,6 +344,9 @@ def representation_fit(model, hand: HandModel, data: MapDataset, curve: list[dic
         ious += iou.max(-1).values.tolist()
         pair = _iou(pred, pred)
         alike += pair[~torch.eye(samples, dtype=torch.bool)].tolist()
+        recon += _iou(model.reconstruct_contact(truth) > threshold, true).diagonal().tolist()  # each map's own
+        values.append(rep.contact.flatten())
+        true_values.append(truth.contact.flatten())
         frac.append(float(pred.float().mean()))
         true_frac.append(float(true.float().mean()))
         if rep.part is not None:
@@ -347,7 +360,9 @@ def representation_fit(model, hand: HandModel, data: MapDataset, curve: list[dic
                 agree.append(float((rep.part == true_part[best])[both].float().mean()))
     med = lambda v: float(np.median(v)) if v else math.nan  # noqa: E731
     result = {"configs": len(keys), "iou_median": med(ious), "other_config_iou_median": med(base),
-              "sample_iou_median": med(alike), "contact_fraction": float(np.mean(frac)) if frac else math.nan,
+              "sample_iou_median": med(alike), "reconstruction_iou_median": med(recon),
+              "contact_p99": _quantile(values, 0.99), "true_contact_p99": _quantile(true_values, 0.99),
+              "contact_fraction": float(np.mean(frac)) if frac else math.nan,
               "true_contact_fraction": float(np.mean(true_frac)) if true_frac else math.nan}
     if model.cfg.parts:
         ps, pt = hist_s / hist_s.sum().clamp_min(1), hist_t / hist_t.sum().clamp_min(1)

@@ -193,8 +193,7 @@ class ContactGen(Component):
         f, glob = self.features(batch)
         target = self.targets(batch) if self.cfg.parts else PartContact(batch.contact, None, None)
         c_in = target.contact[..., None]
-        mu, _ = self.contact_stage.posterior(f, c_in, glob)
-        contact = torch.sigmoid(self.contact_stage.decode(f, mu)[..., 0])
+        contact = self._contact_from_posterior(f, glob, target.contact)
         if not self.cfg.parts:
             return PartContact(contact, None, None)
         onehot = F.one_hot(target.part, N_PARTS).to(f)
@@ -204,6 +203,19 @@ class ContactGen(Component):
         d_inputs = torch.cat([f, c_in, onehot], -1)
         mu, _ = self.direction_stage.posterior(d_inputs, target.direction, glob)
         return PartContact(contact, part, F.normalize(self.direction_stage.decode(d_inputs, mu), dim=-1))
+
+    @torch.no_grad()
+    def reconstruct_contact(self, batch: Batch) -> torch.Tensor:
+        """(B, N) the contact stage's posterior-mean reconstruction of the batch's true maps (its latent from
+        the true map, as :meth:`reconstruct`): how much of a map the stage can carry, apart from sampling."""
+        f, glob = self.features(batch)
+        return self._contact_from_posterior(f, glob, batch.contact)
+
+    def _contact_from_posterior(self, f: torch.Tensor, glob: torch.Tensor, contact: torch.Tensor) -> torch.Tensor:
+        """(B, N) the contact decoded from the posterior mean of the (B, N) ``contact`` maps, given the
+        encoder's per-point (B, N, F) and global (B, G) features."""
+        mu, _ = self.contact_stage.posterior(f, contact[..., None], glob)
+        return torch.sigmoid(self.contact_stage.decode(f, mu)[..., 0])
 
     @torch.no_grad()
     def sample_representation(self, batch: Batch, generator: torch.Generator) -> PartContact:
