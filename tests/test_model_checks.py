@@ -96,3 +96,35 @@ def test_local_mixing_reads_the_neighbours_values(built):
     pc = plain.batch_condition(batch)
     assert pc.neighbours is None
     assert torch.equal(plain(nudged, t, pc)[0, i], plain(x, t, pc)[0, i])
+
+
+def test_the_other_configurations_comparison_leaves_out_copies_of_the_own_maps():
+    """Two configurations of one object that share a prior grasp share its map: the plain comparison scores
+    that copy 1, the distinct one leaves it out; the held-out one scores each own map against the others."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from tohgs.models.checks import _configurations, _held_out_ious, _other_config_ious
+
+    n = 12
+    maps = {p: np.zeros(n, np.float32) for p in (0, 1, 2)}  # prior grasp -> its map on the object's points
+    maps[0][0:4] = 1.0
+    maps[1][2:6] = 1.0   # IoU with grasp 0's: 2 / 6
+    maps[2][3:9] = 1.0   # IoU with grasp 1's: 3 / 7
+    shard = SimpleNamespace(object_id=np.array([5, 5]), grasp_config=np.array([0, 0, 1, 1]),
+                            grasp_prior_index=np.array([0, 1, 1, 2]), attrs={"objects": ["a"]})
+
+    class Maps(SimpleNamespace):  # the MapDataset attributes the comparison reads, per grasp
+        def __getitem__(self, i):
+            return {"contact": maps[int(shard.grasp_prior_index[self.index[i][1]])]}
+
+    data = Maps(shards=[shard], index=[(0, r) for r in range(4)])
+    by_config, keys = _configurations(data, 24)
+    assert keys == [(0, 0), (0, 1)]
+    true = torch.as_tensor(np.stack([maps[0], maps[1]])) > 0.5
+    every, distinct = _other_config_ious(data, by_config, (0, 0), true, 0.5)
+    assert np.allclose(every, [1.0, 3 / 7])  # grasp 1's copy, grasp 2's map
+    assert np.allclose(distinct, [3 / 7])
+    assert np.allclose(_held_out_ious(true), [2 / 6, 2 / 6])
+    assert _held_out_ious(true[:1]) == []

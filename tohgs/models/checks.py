@@ -229,20 +229,43 @@ def _configurations(data: MapDataset, max_configs: int) -> tuple[dict[tuple[int,
     return by_config, list(by_config)[:max_configs]
 
 
+def _prior_index(data: MapDataset, item: int) -> int:
+    """The index in its object's prior store of the grasp of ``data``'s item ``item`` (per-grasp items)."""
+    s, r = data.index[item]
+    return int(data.shards[s].grasp_prior_index[r])
+
+
 def _other_config_ious(data: MapDataset, by_config: dict, key: tuple[int, int], true: torch.Tensor,
-                       threshold: float) -> list[float]:
+                       threshold: float) -> tuple[list[float], list[float]]:
     """The best IoU with the (G, N) boolean ``true`` maps of configuration ``key`` of each true map of the
     other configurations of its object (a predictor that draws one of the object's grasps without looking
-    at the scene)."""
+    at the scene): all of them, and those of the grasps ``key`` does not hold itself.
+
+    A prior grasp kept by two configurations gives both the same map (the maps lie on the object's points),
+    so the first list scores those copies of ``key``'s own maps 1; the second leaves them out and so
+    compares like with like: a map that is not one of the configuration's, as a sampled map is not."""
     s, c = key
     obj = int(data.shards[s].object_id[c])
+    own = {_prior_index(data, i) for i in by_config[key]}
     others = [i for (s2, c2), ids in by_config.items() if (s2, c2) != (s, c)
               and int(data.shards[s2].object_id[c2]) == obj and data.shards[s2].attrs["objects"] == data.shards[s].attrs["objects"]
               for i in ids]
     if not others:
-        return []
+        return [], []
     other = torch.as_tensor(np.stack([data[i]["contact"] for i in others])) > threshold
-    return _iou(other, true).max(-1).values.tolist()
+    best = _iou(other, true).max(-1).values.tolist()
+    return best, [b for b, i in zip(best, others) if _prior_index(data, i) not in own]
+
+
+def _held_out_ious(true: torch.Tensor) -> list[float]:
+    """Each of a configuration's (G, N) boolean true maps scored like a sampled map against the others
+    (leave one out): what a sampler that draws new grasps from the configuration's own distribution scores,
+    up to having G - 1 maps to match instead of G. Empty when G is 1."""
+    if true.shape[0] < 2:
+        return []
+    iou = _iou(true, true)
+    iou.fill_diagonal_(-1.0)
+    return iou.max(-1).values.tolist()
 
 
 def _quantile(parts: list[torch.Tensor], q: float) -> float:
@@ -267,23 +290,29 @@ def contact_fit(model, data: MapDataset, max_configs: int = 24, samples: int = 4
     contact alpha of 100). Each sampled map scores its best IoU with a ground-truth map of its own
     configuration. The comparison does the same for the ground-truth maps of the *other* configurations
     of the same object (the points are the same samples of the same mesh), each scored like a sampled map:
-    a predictor that draws one of the object's grasps without looking at the scene. (The same prior grasp
-    kept in two configurations gives the same map, so some of these score 1.)
+    a predictor that draws one of the object's grasps without looking at the scene. The same prior grasp
+    kept in two configurations gives the same map, so some of these are copies of the configuration's own
+    maps and score 1; the distinct comparison leaves those out (a sampled map is never a copy). The
+    held-out comparison scores each true map of the configuration against its other true maps: what a
+    sampler of the configuration's own grasp distribution would score.
 
     Returns:
         ``iou_median`` (sampled maps), ``other_config_iou_median`` (other configurations' maps, where the
-        object has another configuration), ``contact_fraction`` (the sampled maps' mean share of
+        object has another configuration), ``other_config_distinct_iou_median`` (those of them whose grasp
+        the configuration does not hold; ``other_config_distinct_maps`` of them), ``held_out_iou_median``
+        (each true map against the configuration's others), ``contact_fraction`` (the sampled maps' mean share of
         points in contact; the ground truth's as ``true_contact_fraction``) and ``roughness`` (the sampled
         maps' mean :func:`map_roughness`; the ground truth's as ``true_roughness``).
     """
     g = torch.Generator().manual_seed(seed)
     by_config, keys = _configurations(data, max_configs)
-    ious, base, frac, true_frac, rough, true_rough = [], [], [], [], [], []
+    ious, base, distinct, held, frac, true_frac, rough, true_rough = [], [], [], [], [], [], [], []
     for key in keys:
         items = [data[i] for i in by_config[key]]
         true_values = torch.as_tensor(np.stack([it["contact"] for it in items]))
         true = true_values > threshold
-        base += _other_config_ious(data, by_config, key, true, threshold)
+        every, new = _other_config_ious(data, by_config, key, true, threshold)
+        base, distinct, held = base + every, distinct + new, held + _held_out_ious(true)
         it = items[0]
         pts = torch.as_tensor(it["points"])[None].expand(samples, -1, -1)
         nrm = torch.as_tensor(it["normals"])[None].expand(samples, -1, -1)
@@ -300,8 +329,10 @@ def contact_fit(model, data: MapDataset, max_configs: int = 24, samples: int = 4
         rough += both[:samples].tolist()
         true_rough += both[samples:].tolist()
     mean = lambda v: float(np.mean(v)) if v else math.nan  # noqa: E731
-    return {"configs": len(keys), "iou_median": float(np.median(ious)) if ious else math.nan,
-            "other_config_iou_median": float(np.median(base)) if base else math.nan,
+    med = lambda v: float(np.median(v)) if v else math.nan  # noqa: E731
+    return {"configs": len(keys), "iou_median": med(ious), "other_config_iou_median": med(base),
+            "other_config_distinct_iou_median": med(distinct), "other_config_distinct_maps": len(distinct),
+            "held_out_iou_median": med(held),
             "contact_fraction": mean(frac), "true_contact_fraction": mean(true_frac),
             "roughness": mean(rough), "true_roughness": mean(true_rough)}
 
@@ -313,8 +344,9 @@ def representation_fit(model, hand: HandModel, data: MapDataset, curve: list[dic
     against the true ones of the configuration's grasps (module docstring).
 
     Returns:
-        ``iou_median`` / ``other_config_iou_median`` / ``contact_fraction`` / ``true_contact_fraction`` as
-        :func:`contact_fit`; ``sample_iou_median``, the median IoU between two samples of one configuration
+        ``iou_median`` / ``other_config_iou_median`` / ``other_config_distinct_iou_median`` /
+        ``other_config_distinct_maps`` / ``held_out_iou_median`` / ``contact_fraction`` /
+        ``true_contact_fraction`` as :func:`contact_fit`; ``sample_iou_median``, the median IoU between two samples of one configuration
         (1: the samples are one map); ``reconstruction_iou_median``, the median IoU of each true map with the
         contact stage's posterior-mean reconstruction of it (what the stage can carry: low where it
         under-fits, whatever its prior), and ``contact_p99`` / ``true_contact_p99``, the 99th percentile of the
@@ -330,14 +362,15 @@ def representation_fit(model, hand: HandModel, data: MapDataset, curve: list[dic
     g = torch.Generator().manual_seed(seed)
     by_config, keys = _configurations(data, max_configs)
     alpha = data.shards[0].alpha_contact
-    ious, base, frac, true_frac, alike, agree, recon = [], [], [], [], [], [], []
+    ious, base, distinct, held, frac, true_frac, alike, agree, recon = [], [], [], [], [], [], [], [], []
     values, true_values = [], []
     hist_s, hist_t = torch.zeros(N_PARTS), torch.zeros(N_PARTS)
     for key in keys:
         items = [data[i] for i in by_config[key]]
         truth = Batch.collate(items)
         true = truth.contact > threshold  # (G, N)
-        base += _other_config_ious(data, by_config, key, true, threshold)
+        every, new = _other_config_ious(data, by_config, key, true, threshold)
+        base, distinct, held = base + every, distinct + new, held + _held_out_ious(true)
         rep = model.sample_representation(Batch.collate([items[0]] * samples), g)
         pred = rep.contact > threshold  # (S, N)
         iou = _iou(pred, true)  # (S, G)
@@ -360,7 +393,8 @@ def representation_fit(model, hand: HandModel, data: MapDataset, curve: list[dic
                 agree.append(float((rep.part == true_part[best])[both].float().mean()))
     med = lambda v: float(np.median(v)) if v else math.nan  # noqa: E731
     result = {"configs": len(keys), "iou_median": med(ious), "other_config_iou_median": med(base),
-              "sample_iou_median": med(alike), "reconstruction_iou_median": med(recon),
+              "other_config_distinct_iou_median": med(distinct), "other_config_distinct_maps": len(distinct),
+              "held_out_iou_median": med(held), "sample_iou_median": med(alike), "reconstruction_iou_median": med(recon),
               "contact_p99": _quantile(values, 0.99), "true_contact_p99": _quantile(true_values, 0.99),
               "contact_fraction": float(np.mean(frac)) if frac else math.nan,
               "true_contact_fraction": float(np.mean(true_frac)) if true_frac else math.nan}
