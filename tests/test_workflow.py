@@ -113,6 +113,7 @@ def test_the_smoke_models_read_their_condition_and_untrained_copies_do_not(smoke
         assert cd["shuffled_condition"]["gap"] > MIN_CONTACT_GAP, (task, cd["shuffled_condition"])
         assert cd["permuted_map"]["gap"] > MIN_PERMUTED_GAP, (task, cd["permuted_map"])
         assert 0 < cd["fit"]["true_roughness"] < 1 and 0 <= cd["fit"]["roughness"] < 1, (task, cd["fit"])
+        assert cd["fit"]["other_config_distinct_maps"] >= 0 and "held_out_iou_median" in cd["fit"], (task, cd["fit"])
         assert gd["fit"]["grasps"] > 0 and 0 <= gd["fit"]["touch_rate"] <= 1
         for name in ("contact_gen", "contact_cvae"):  # ContactGen's representations are measured, not held
             fit = checks[name]["fit"]
