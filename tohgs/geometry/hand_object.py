@@ -78,11 +78,17 @@ def distance_to_vertices(points: torch.Tensor, verts: torch.Tensor, idx: torch.T
     return ((points - near) ** 2).sum(-1).add(1e-12).sqrt()
 
 
+def contact_of_distance(d: torch.Tensor, alpha: float) -> torch.Tensor:
+    """The normalised contact map ``1 - 2 (sigmoid(alpha d) - 0.5)`` of distances ``d`` (any shape, m): 1 at
+    contact, falling to 0 far away (torch's twin of :func:`tohgs.geometry.maps.normalised_map`)."""
+    return 1.0 - 2.0 * (torch.sigmoid(alpha * d) - 0.5)
+
+
 def contact_values(points: torch.Tensor, hand_verts: torch.Tensor, alpha: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """The normalised contact map (B, N) ``1 - 2 (sigmoid(alpha d) - 0.5)`` of points (B, N, 3) to hands
-    (B, V, 3) (d the distance to the nearest vertex, m) and that vertex's index (B, N)."""
+    """The normalised contact map (B, N) (:func:`contact_of_distance`) of points (B, N, 3) to hands (B, V, 3)
+    (d the distance to the nearest vertex, m) and that vertex's index (B, N)."""
     dmin, idx = nearest_vertex(points, hand_verts)
-    return 1.0 - 2.0 * (torch.sigmoid(alpha * dmin) - 0.5), idx
+    return contact_of_distance(dmin, alpha), idx
 
 
 def inside_hand(points: torch.Tensor, hand_verts: torch.Tensor, hand_normals: torch.Tensor,

@@ -34,8 +34,8 @@ from dataclasses import dataclass
 
 import torch
 
-from tohgs.geometry.hand_object import (contact_values, distance_to_vertices, inside_hand, nearest_vertex,
-                                       vertex_normals)
+from tohgs.geometry.hand_object import (contact_of_distance, contact_values, distance_to_vertices, inside_hand,
+                                       nearest_vertex, vertex_normals)
 from tohgs.hand.model import HandModel, HandOutput
 from tohgs.models.contact_net import ObjectCache
 
@@ -114,7 +114,7 @@ def object_caches(contact_net, points: torch.Tensor, sizes: list[int] | None = N
 def _map_value_at(alpha: float, r: float) -> torch.Tensor:
     """The contact map ``1 - 2 (sigmoid(alpha d) - 0.5)`` at distance ``r`` (m): a point is nearer than ``r``
     to its vertex exactly where the map exceeds this value (the map falls with the distance)."""
-    return 1.0 - 2.0 * (torch.sigmoid(torch.tensor(alpha * r)) - 0.5)
+    return contact_of_distance(torch.tensor(alpha * r), 1.0)  # alpha * r rounded once, as the threshold always was
 
 
 def tta_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact_net, alpha: float,
@@ -143,7 +143,7 @@ def tta_energy(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, conta
     else:
         idx = nearest
         d = distance_to_vertices(points, verts, idx)
-        c_hand = 1.0 - 2.0 * (torch.sigmoid(alpha * d) - 0.5)
+        c_hand = contact_of_distance(d, alpha)
     with torch.no_grad():
         c_target = by_problem(lambda lo, gl, pr, v, c: contact_net.predict_map_cached(ObjectCache(lo, gl, pr), v, c),
                               sizes, cache.local, cache.glob, cache.projected, verts, c_hand.detach())

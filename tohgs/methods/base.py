@@ -145,8 +145,11 @@ def smooth_contact(points: torch.Tensor, contact: torch.Tensor, k: int) -> torch
     """
     if k <= 1:
         return contact
+    from tohgs.models.contact_diffuser import nearest_neighbours
+
     k = min(k, points.shape[0])
-    nn = torch.cdist(points, points).topk(k, largest=False).indices  # (N, k), the point itself first
+    own = torch.arange(points.shape[0], device=points.device)[:, None]
+    nn = torch.cat([own, nearest_neighbours(points[None], k - 1)[0]], -1)  # (N, k): itself, then its k - 1 nearest
     return contact[:, nn].mean(-1)
 
 

@@ -53,7 +53,7 @@ from collections.abc import Callable
 import torch
 
 from tohgs.geometry.cloud import clearance_violation, cloud_signed_distance, even_subset
-from tohgs.geometry.hand_object import contact_values
+from tohgs.geometry.hand_object import contact_of_distance, contact_values
 from tohgs.models.guidance_settings import GuidanceSettings  # noqa: F401 (re-exported: the settings live without torch)
 
 TERMS = ("scene", "object", "contact", "joints")
@@ -153,7 +153,7 @@ def near_scene_weights(d_init: torch.Tensor, d_goal: torch.Tensor, near: float, 
         near: the distance (m) at which the weight reaches 0.
         alpha: the maps' sharpness, 1/m.
     """
-    at_near = 1.0 - 2.0 * (torch.sigmoid(torch.tensor(alpha * near, dtype=torch.float64)) - 0.5)
+    at_near = contact_of_distance(torch.tensor(alpha * near, dtype=torch.float64), 1.0)
     d = torch.maximum(d_init, d_goal)
     return ((d - float(at_near)) / (1.0 - float(at_near))).clamp(0.0, 1.0)
 
