@@ -41,8 +41,10 @@ import torch
 from scipy.stats import wilcoxon
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(1, str(Path(__file__).resolve().parent.parent / "tests"))  # helpers.near_object: the tests' start hands
 from base_commit import BASE_COMMIT, base_module, short_commit  # noqa: E402
 from bench_batched import configurations, timed  # noqa: E402
+from helpers import near_object  # noqa: E402
 
 from tohgs.config import validate_config  # noqa: E402
 from tohgs.geometry.contact_parts import PartContact  # noqa: E402
@@ -53,18 +55,6 @@ from tohgs.hand import load_hand  # noqa: E402
 from tohgs.models.component import build_component  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
-
-
-def near_object(hand, points: torch.Tensor, n: int, seed: int) -> torch.Tensor:
-    """(n, 51) relaxed hands turned at random (0.4 rad per axis) with the palm's centre on a random
-    point of the (N, 3) cloud."""
-    gen = torch.Generator().manual_seed(seed)
-    g = hand.preset("relaxed", n).clone()
-    g[:, 3:6] += 0.4 * torch.randn(n, 3, generator=gen)
-    with torch.no_grad():
-        palm = hand(g).vertices[:, hand.assets.palm_ids].mean(1)
-    g[:, :3] += points[torch.randint(0, len(points), (n,), generator=gen)] - palm
-    return g
 
 
 def geometry_metrics(hand, grasp: torch.Tensor, points: torch.Tensor) -> dict[str, np.ndarray]:
