@@ -268,6 +268,24 @@ def _held_out_ious(true: torch.Tensor) -> list[float]:
     return iou.max(-1).values.tolist()
 
 
+def _reference_ious(data: MapDataset, by_config: dict, key: tuple[int, int], true: torch.Tensor, threshold: float,
+                    into: dict[str, list[float]]) -> None:
+    """Appends to ``into`` the IoUs the sampled maps of configuration ``key`` (its (G, N) boolean ``true``
+    maps) are compared with: ``other`` and ``distinct`` (:func:`_other_config_ious`) and ``held``
+    (:func:`_held_out_ious`)."""
+    every, new = _other_config_ious(data, by_config, key, true, threshold)
+    for name, values in (("other", every), ("distinct", new), ("held", _held_out_ious(true))):
+        into.setdefault(name, []).extend(values)
+
+
+def _reference_summary(into: dict[str, list[float]]) -> dict:
+    """The checks' entries for the comparisons :func:`_reference_ious` gathered (:func:`contact_fit`)."""
+    med = lambda v: float(np.median(v)) if v else math.nan  # noqa: E731
+    distinct = into.get("distinct", [])
+    return {"other_config_iou_median": med(into.get("other", [])), "other_config_distinct_iou_median": med(distinct),
+            "other_config_distinct_maps": len(distinct), "held_out_iou_median": med(into.get("held", []))}
+
+
 def _quantile(parts: list[torch.Tensor], q: float) -> float:
     """The ``q`` quantile of the values of the 1-D tensors ``parts`` together (NaN when there are none)."""
     return float(torch.quantile(torch.cat(parts).float(), q)) if parts else math.nan
@@ -306,13 +324,13 @@ def contact_fit(model, data: MapDataset, max_configs: int = 24, samples: int = 4
     """
     g = torch.Generator().manual_seed(seed)
     by_config, keys = _configurations(data, max_configs)
-    ious, base, distinct, held, frac, true_frac, rough, true_rough = [], [], [], [], [], [], [], []
+    ious, frac, true_frac, rough, true_rough = [], [], [], [], []
+    reference: dict[str, list[float]] = {}
     for key in keys:
         items = [data[i] for i in by_config[key]]
         true_values = torch.as_tensor(np.stack([it["contact"] for it in items]))
         true = true_values > threshold
-        every, new = _other_config_ious(data, by_config, key, true, threshold)
-        base, distinct, held = base + every, distinct + new, held + _held_out_ious(true)
+        _reference_ious(data, by_config, key, true, threshold, reference)
         it = items[0]
         pts = torch.as_tensor(it["points"])[None].expand(samples, -1, -1)
         nrm = torch.as_tensor(it["normals"])[None].expand(samples, -1, -1)
@@ -330,9 +348,7 @@ def contact_fit(model, data: MapDataset, max_configs: int = 24, samples: int = 4
         true_rough += both[samples:].tolist()
     mean = lambda v: float(np.mean(v)) if v else math.nan  # noqa: E731
     med = lambda v: float(np.median(v)) if v else math.nan  # noqa: E731
-    return {"configs": len(keys), "iou_median": med(ious), "other_config_iou_median": med(base),
-            "other_config_distinct_iou_median": med(distinct), "other_config_distinct_maps": len(distinct),
-            "held_out_iou_median": med(held),
+    return {"configs": len(keys), "iou_median": med(ious), **_reference_summary(reference),
             "contact_fraction": mean(frac), "true_contact_fraction": mean(true_frac),
             "roughness": mean(rough), "true_roughness": mean(true_rough)}
 
@@ -362,15 +378,15 @@ def representation_fit(model, hand: HandModel, data: MapDataset, curve: list[dic
     g = torch.Generator().manual_seed(seed)
     by_config, keys = _configurations(data, max_configs)
     alpha = data.shards[0].alpha_contact
-    ious, base, distinct, held, frac, true_frac, alike, agree, recon = [], [], [], [], [], [], [], [], []
+    ious, frac, true_frac, alike, agree, recon = [], [], [], [], [], []
+    reference: dict[str, list[float]] = {}
     values, true_values = [], []
     hist_s, hist_t = torch.zeros(N_PARTS), torch.zeros(N_PARTS)
     for key in keys:
         items = [data[i] for i in by_config[key]]
         truth = Batch.collate(items)
         true = truth.contact > threshold  # (G, N)
-        every, new = _other_config_ious(data, by_config, key, true, threshold)
-        base, distinct, held = base + every, distinct + new, held + _held_out_ious(true)
+        _reference_ious(data, by_config, key, true, threshold, reference)
         rep = model.sample_representation(Batch.collate([items[0]] * samples), g)
         pred = rep.contact > threshold  # (S, N)
         iou = _iou(pred, true)  # (S, G)
@@ -392,9 +408,8 @@ def representation_fit(model, hand: HandModel, data: MapDataset, curve: list[dic
             if both.any():
                 agree.append(float((rep.part == true_part[best])[both].float().mean()))
     med = lambda v: float(np.median(v)) if v else math.nan  # noqa: E731
-    result = {"configs": len(keys), "iou_median": med(ious), "other_config_iou_median": med(base),
-              "other_config_distinct_iou_median": med(distinct), "other_config_distinct_maps": len(distinct),
-              "held_out_iou_median": med(held), "sample_iou_median": med(alike), "reconstruction_iou_median": med(recon),
+    result = {"configs": len(keys), "iou_median": med(ious), **_reference_summary(reference),
+              "sample_iou_median": med(alike), "reconstruction_iou_median": med(recon),
               "contact_p99": _quantile(values, 0.99), "true_contact_p99": _quantile(true_values, 0.99),
               "contact_fraction": float(np.mean(frac)) if frac else math.nan,
               "true_contact_fraction": float(np.mean(true_frac)) if true_frac else math.nan}
