@@ -54,3 +54,16 @@ def base_module(module: str, commit: str = BASE_COMMIT) -> ModuleType:
 def short_commit(ref: str = "HEAD") -> str:
     """The short hash of ``ref`` in this repository."""
     return subprocess.run(["git", "rev-parse", "--short", ref], cwd=REPO, capture_output=True, text=True).stdout.strip()
+
+
+def commit_label() -> str:
+    """The short hash of HEAD, with ``-dirty`` where tracked files differ from it ("unknown" without git): what
+    a benchmark's JSON records as the code it measured."""
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True,
+                              check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO, capture_output=True,
+                               text=True, check=True).stdout.strip()
+        return head + ("-dirty" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"

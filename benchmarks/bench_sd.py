@@ -25,7 +25,7 @@ import json
 import os
 import platform
 import resource
-import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -41,19 +41,10 @@ from tohgs.metrics.quality import DisplacementSimulator, SDSettings, SDWorkers, 
 from tohgs.settings import settings_from
 
 REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO / "benchmarks"))
+from base_commit import commit_label  # noqa: E402
 POSE = np.array([0.1, -0.2, 0.75, 0.0, 0.0, np.sin(0.4), np.cos(0.4)])  # the object's world pose
 PAPER_GRAVITY = (0.0, 9.8, 0.0)
-
-
-def _commit() -> str:
-    try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True,
-                              check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO, capture_output=True,
-                               text=True, check=True).stdout.strip()
-        return head + ("-dirty" if dirty else "")
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def _cpu() -> float:
@@ -228,7 +219,7 @@ def main() -> None:
                 "cpu_s": [round(x, 2) for x in cpu[way]]}
 
     result = {
-        "benchmark": "sd", "commit": _commit(), "machine": platform.processor() or platform.machine(),
+        "benchmark": "sd", "commit": commit_label(), "machine": platform.processor() or platform.machine(),
         "platform": platform.platform(), "cpu_count": os.cpu_count(), "load_average_start": [round(x, 2) for x in load_start],
         "load_average_end": [round(x, 2) for x in os.getloadavg()],
         "pybullet": __import__("importlib.metadata").metadata.version("pybullet"),

@@ -9,6 +9,9 @@ For every predicted grasp of a test configuration (a prediction store, :mod:`toh
   gravity is the official fixed (0, 9.8, 0) m/s^2 of the world frame (``evaluation.sd_gravity``);
 - ``sd_palm`` (m, beyond the paper, with ``palm_sd``): SD again with gravity pulling the target out of the
   palm (:func:`tohgs.metrics.quality.palm_gravity`), NaN without;
+- the hand SD simulates (``evaluation.sd_hand``, ``sd_hand``): its closed mesh (``"full"``) or a decimated
+  collision hand of a triangle count (:mod:`tohgs.hand.collision`), posed from the full hand's vertices;
+  SD, robust SD and palm SD simulate it, every other metric (PV above all) keeps the full mesh;
 - ``init_opp`` / ``goal_opp``: the fraction of hand vertices inside the scene meshes (support, shelf,
   obstacles, base brick; never the target) for the hand at the initial pose and for the same hand carried
   to the goal pose;
@@ -41,6 +44,7 @@ from tohgs.data.scenes import read_scenes
 from tohgs.geometry.grasp import pose_matrix
 from tohgs.geometry.scene import SceneCollider, scene_meshes
 from tohgs.hand.assets import HandAssets
+from tohgs.hand.collision import CollisionHand, sd_hand_of
 from tohgs.metrics.quality import (DisplacementSimulator, RobustSDSettings, SDSettings, SDWorkers, hand_quality,
                                    palm_gravity, surface_voxels)
 
@@ -93,8 +97,8 @@ def _object_assets(objects_dir: Path, name: str, pitch: float, cache: dict, cach
 def grasp_metrics(verts_init: np.ndarray, verts_goal: np.ndarray, faces: np.ndarray, palm_ids: np.ndarray,
                   obj: _ObjectAssets, target_pose: np.ndarray, collider: SceneCollider, pitch: float,
                   sim: DisplacementSimulator, robust: RobustSDSettings | None = None,
-                  robust_rngs: list[np.random.Generator] | None = None, palm_sd: bool = False
-                  ) -> dict[str, np.ndarray]:
+                  robust_rngs: list[np.random.Generator] | None = None, palm_sd: bool = False,
+                  sd_hand: CollisionHand | None = None) -> dict[str, np.ndarray]:
     """PV, SD, contact distance (:func:`tohgs.metrics.quality.hand_quality`) and both OPPs of S hands of one
     configuration; with ``palm_sd`` also ``"sd_palm"``, (S,) SD with gravity out of each palm, m.
 
@@ -109,14 +113,19 @@ def grasp_metrics(verts_init: np.ndarray, verts_goal: np.ndarray, faces: np.ndar
         sim: a simulator of the target (its collision shape and the SD protocol).
         robust, robust_rngs: robust SD's settings and one generator per hand (:func:`grasp_rng`), if any:
             then ``"sd_perturbed"`` (S, K) too (:func:`~tohgs.metrics.quality.hand_quality`).
+        palm_sd: also ``"sd_palm"``.
+        sd_hand: the collision hand SD, robust SD and palm SD simulate, posed from ``verts_init`` (None: the
+            full hand, ``verts_init`` and ``faces``).
     """
+    sd_mesh = None if sd_hand is None else (sd_hand.pose(verts_init), sd_hand.faces)
     m = hand_quality(verts_init, faces, palm_ids, obj.mesh, obj.voxels, sim, pitch, target_pose,
-                     robust=robust, robust_rngs=robust_rngs)
+                     robust=robust, robust_rngs=robust_rngs, sd_mesh=sd_mesh)
     if palm_sd:
         T = pose_matrix(target_pose)
         centre = T[:3, :3] @ np.asarray(obj.vertex_mean, dtype=np.float64) + T[:3, 3]
         g = palm_gravity(verts_init[:, palm_ids].mean(1), centre, float(np.linalg.norm(sim.settings.gravity)))
-        m["sd_palm"] = sim.displacements(verts_init, faces, object_pose=target_pose, gravity=g)
+        sd_vertices, sd_faces = (verts_init, faces) if sd_mesh is None else sd_mesh
+        m["sd_palm"] = sim.displacements(sd_vertices, sd_faces, object_pose=target_pose, gravity=g)
     return {**m, "init_opp": occupied_fraction(verts_init, collider), "goal_opp": occupied_fraction(verts_goal, collider)}
 
 
@@ -130,7 +139,7 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
                          supports_json: str | Path, hand: HandAssets, sd: dict, voxel_pitch: float = 0.001,
                          cache_dir: str | Path | None = None, progress: bool = False,
                          robust_sd: dict | None = None, palm_sd: bool = False, pv_mesh: str = "collision",
-                         threads: int = 1) -> pd.DataFrame:
+                         threads: int = 1, sd_hand: str | int = "full") -> pd.DataFrame:
     """One row per predicted grasp (columns :data:`COLUMNS`) of one task and method.
 
     Args:
@@ -152,6 +161,8 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
         pv_mesh: the surface PV voxelises, ``"collision"`` (the paper's protocol) or ``"mesh"``.
         threads: the job's cores: SD runs in that many worker processes, shared by the objects
             (:class:`~tohgs.metrics.quality.SDWorkers`; the same numbers as one).
+        sd_hand: the hand SD simulates (``evaluation.sd_hand``): ``"full"`` (its closed faces) or a triangle
+            count (:func:`tohgs.hand.collision.sd_hand_of`, cached under ``cache_dir``).
     """
     from tohgs.assets.supports import read_supports
 
@@ -166,6 +177,7 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
     supports = read_supports(supports_json)
     objects_dir = Path(objects_dir)
     faces = np.asarray(hand.closed_faces)
+    collision = sd_hand_of(hand, sd_hand, cache_dir)
     n_vertices = len(hand.rest_vertices)
     assets: dict = {}
     meshes: dict = {}
@@ -197,7 +209,7 @@ def evaluate_predictions(prediction_store: str | Path, scene_stores: list[str | 
                 v_goal = hand.vertices(arrays["grasp_goal"][i][kept])
                 rngs = [grasp_rng(robust.seed, name, c, k) for k in np.flatnonzero(kept)]
                 m = grasp_metrics(v_init, v_goal, faces, hand.palm_ids, obj, sc.target_init_pose[c], collider,
-                                  voxel_pitch, sims[name], robust, rngs, palm_sd)
+                                  voxel_pitch, sims[name], robust, rngs, palm_sd, collision)
                 if kept.all() or kept.sum() >= 2:
                     ds = diversity(v_init)
             at = np.cumsum(kept) - 1  # the row of each kept grasp among the metrics

@@ -3,7 +3,8 @@
 - PV, penetration volume: the object at its pose voxelised at a 1 mm pitch (surface voxels, as trimesh's
   ``voxelized`` returns them); the voxel centres inside the closed hand mesh are counted, times the voxel
   volume. m^3 (tables report cm^3).
-- SD, simulation displacement: PyBullet, the hand a static concave triangle mesh (mass 0, friction 3,
+- SD, simulation displacement: PyBullet, the hand a static concave triangle mesh (its closed faces, or the
+  decimated collision hand of ``evaluation.sd_hand``, :mod:`tohgs.hand.collision`; mass 0, friction 3,
   restitution 0); the object its convex decomposition, mass 1, friction 3, restitution 0.5, its inertial
   frame at the mesh's vertex mean; time step 1/240 s, 150 solver iterations, 35 steps (the official
   code's setting, not the paper's "1 s"); SD is how far the object's centre moved, m; a failed simulation
@@ -418,8 +419,8 @@ IDENTITY_POSE = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])  # [x, y, z, qx, q
 def hand_quality(hand_vertices: np.ndarray, faces: np.ndarray, palm_ids: np.ndarray, mesh: trimesh.Trimesh,
                  voxels: np.ndarray, sim: DisplacementSimulator, pitch: float = VOXEL_PITCH,
                  object_pose: np.ndarray | None = None, progress: bool = False,
-                 robust: RobustSDSettings | None = None, robust_rngs: list[np.random.Generator] | None = None
-                 ) -> dict[str, np.ndarray]:
+                 robust: RobustSDSettings | None = None, robust_rngs: list[np.random.Generator] | None = None,
+                 sd_mesh: tuple[np.ndarray, np.ndarray] | None = None) -> dict[str, np.ndarray]:
     """PV (m^3), SD (m) and the contact distance (m) of S hands around one object: the one protocol the
     prior grasps and the evaluation share; with ``robust`` (perturbations > 0) also ``"sd_perturbed"``,
     (S, K) SDs under perturbed starts (:func:`perturbed_displacements`), NaN rows for the hands past
@@ -435,6 +436,10 @@ def hand_quality(hand_vertices: np.ndarray, faces: np.ndarray, palm_ids: np.ndar
             so its ``workers`` share them.
         object_pose: the object's ``[x, y, z, qx, qy, qz, qw]`` pose (default: its own frame).
         progress: show a progress bar over the hands' SD.
+        sd_mesh: ``(vertices, faces)`` that SD (and robust SD) simulates instead of the hand's: (S, V', 3)
+            the same S hands as another mesh, m (a :class:`tohgs.hand.collision.CollisionHand` posed from
+            ``hand_vertices``), and its (F', 3) faces; PV, the contact distance and the gravity's palm centre
+            keep the full hand. None: SD simulates ``hand_vertices`` and ``faces``.
     """
     pose = IDENTITY_POSE if object_pose is None else np.asarray(object_pose, dtype=np.float64)
     T = pose_matrix(pose)
@@ -443,7 +448,10 @@ def hand_quality(hand_vertices: np.ndarray, faces: np.ndarray, palm_ids: np.ndar
     cd = np.atleast_1d(contact_distance(local, mesh))
     centre = T[:3, :3] @ np.asarray(sim.vertex_mean, dtype=np.float64) + T[:3, 3]
     gravity = sd_gravity(sim.settings, hand_vertices[:, palm_ids].mean(1), centre)
-    sd = sim.displacements(hand_vertices, faces, pose, gravity, progress=progress)
+    sd_vertices, sd_faces = (hand_vertices, faces) if sd_mesh is None else sd_mesh
+    if len(sd_vertices) != len(hand_vertices):
+        raise ValueError(f"sd_mesh must hold the same {len(hand_vertices)} hands, got {len(sd_vertices)}")
+    sd = sim.displacements(sd_vertices, sd_faces, pose, gravity, progress=progress)
     out = {"pv": pv, "sd": sd, "contact_distance": cd}
     if robust is not None and robust.perturbations > 0:
         s, k = len(hand_vertices), robust.perturbations
@@ -453,9 +461,9 @@ def hand_quality(hand_vertices: np.ndarray, faces: np.ndarray, palm_ids: np.ndar
         n = s if robust.grasps_per_config == 0 else min(s, robust.grasps_per_config)
         perturbed = np.full((s, k), np.nan)
         if n:  # the n hands' K starts each, simulated as one batch (:func:`perturbed_displacements` per hand)
-            starts = [perturbed_starts(hand_vertices[i], robust, robust_rngs[i], sim.settings.solver_iterations)
+            starts = [perturbed_starts(sd_vertices[i], robust, robust_rngs[i], sim.settings.solver_iterations)
                       for i in range(n)]
-            sds = sim.displacements(np.concatenate([h for h, _ in starts]), faces, pose,
+            sds = sim.displacements(np.concatenate([h for h, _ in starts]), sd_faces, pose,
                                     np.repeat(gravity[:n], k, axis=0), np.concatenate([it for _, it in starts]))
             perturbed[:n] = sds.reshape(n, k)
         out["sd_perturbed"] = perturbed

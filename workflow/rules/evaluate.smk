@@ -20,6 +20,7 @@ rule evaluate:
         robust_sd=robust_sd_settings,
         palm_sd=palm_sd_of,
         pv_mesh=setting("evaluation", "pv_mesh"),
+        sd_hand=setting("evaluation", "sd_hand"),
     threads: config["evaluation"]["threads"]
     resources:
         **rule_resources("evaluate"),
