@@ -358,3 +358,28 @@ def test_contact_smoothing_averages_over_neighbours_and_keeps_regions():
     assert wrong(smooth) < 0.5 * wrong(noisy[0]), (wrong(noisy[0]), wrong(smooth))
     ones = torch.ones(2, 400)
     torch.testing.assert_close(smooth_contact(pts, ones, 8), ones)
+
+
+def test_neighbour_mean_and_max_equal_the_gathered_reduction():
+    """ContactDiffuser's local mixing reduces over the neighbours one at a time: the same values (and, with
+    distinct neighbours, gradients) as gathering every neighbour and reducing, with and without autograd."""
+    from tohgs.models.contact_diffuser import neighbour_mean_max
+    from tohgs.models.pointnet2 import gather
+
+    g = torch.Generator().manual_seed(0)
+    x = torch.randn(3, 40, 8, generator=g, requires_grad=True)
+    idx = torch.rand(3, 40, 40, generator=g).topk(6, dim=-1).indices
+    w = torch.randn(3, 40, 8, generator=g)
+    nb = gather(x, idx)
+    ref_mean, ref_max = nb.mean(2), nb.max(2).values
+    ((ref_mean * w).sum() + (ref_max * w).sum()).backward()
+    ref_grad, x.grad = x.grad.clone(), None
+    mean, top = neighbour_mean_max(x, idx)
+    ((mean * w).sum() + (top * w).sum()).backward()
+    torch.testing.assert_close(mean, ref_mean, atol=1e-6, rtol=0)
+    torch.testing.assert_close(top, ref_max, atol=0, rtol=0)
+    torch.testing.assert_close(x.grad, ref_grad, atol=1e-5, rtol=0)
+    with torch.no_grad():
+        mean, top = neighbour_mean_max(x, idx)
+    torch.testing.assert_close(mean, ref_mean.detach(), atol=1e-6, rtol=0)
+    torch.testing.assert_close(top, ref_max.detach(), atol=0, rtol=0)

@@ -170,10 +170,21 @@ def network_goal_transform(goal_transform: np.ndarray, centroid: np.ndarray) -> 
     return S @ goal_transform @ S_inv
 
 
-def random_rotation(generator: np.random.Generator, mode: str) -> np.ndarray:
-    """(3, 3) a uniformly random rotation (``"so3"``), about z only (``"z"``), or the identity (``"none"``)."""
+ROTATIONS = ("so3", "z", "bounded", "none")
+
+
+def random_rotation(generator: np.random.Generator, mode: str, max_angle: float = np.pi / 6) -> np.ndarray:
+    """(3, 3) a uniformly random rotation (``"so3"``), about z only (``"z"``), about a uniformly random axis
+    by an angle uniform in [0, ``max_angle``] rad (``"bounded"``: small turns of the initial pose, as
+    ContactGen trains), or the identity (``"none"``)."""
     if mode == "none":
         return np.eye(3)
+    if mode == "bounded":
+        axis = generator.normal(size=3)
+        angle = generator.uniform(0.0, max_angle)
+        from scipy.spatial.transform import Rotation
+
+        return Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix()
     if mode == "z":
         a = generator.uniform(0, 2 * np.pi)
         c, s = np.cos(a), np.sin(a)
@@ -184,7 +195,7 @@ def random_rotation(generator: np.random.Generator, mode: str) -> np.ndarray:
         from scipy.spatial.transform import Rotation
 
         return Rotation.from_quat(q).as_matrix()
-    raise ValueError(f"rotation mode must be 'so3', 'z' or 'none', not {mode!r}")
+    raise ValueError(f"rotation mode must be one of {ROTATIONS}, not {mode!r}")
 
 
 class MapDataset:
@@ -194,6 +205,7 @@ class MapDataset:
     Items are dicts of float32 numpy arrays: ``points`` (N, 3), ``normals`` (N, 3), ``d_init``, ``d_goal``
     (N,), ``scene`` (Ns, 3), ``goal_transform`` (4, 4, network frame), ``object_id``, ``config_index``, ``shard`` and ``row``
     (ints), plus ``grasp`` (51,) and ``contact`` (N,) per grasp. With ``rotation`` other than ``"none"``
+    (:func:`random_rotation`; ``"bounded"`` turns by at most ``rotation_max`` rad)
     the sample is turned about the origin by a random rotation R: points, normals, the scene and the goal transform
     (``R T R^-1``), and the grasp vector through :func:`tohgs.geometry.grasp.transform_grasp` (its
     translation corrected through the wrist offset). :meth:`item` ``(i, draw)`` draws R from ``(seed, draw,
@@ -201,11 +213,12 @@ class MapDataset:
     reproducible; ``dataset[i]`` is draw 0. :meth:`tohgs.data.batch.Batch.collate` stacks items.
     """
 
-    def __init__(self, paths: list[str | Path], per: str = "grasp", rotation: str = "none", seed: int = 0):
+    def __init__(self, paths: list[str | Path], per: str = "grasp", rotation: str = "none", seed: int = 0,
+                 rotation_max: float = np.pi / 6):
         if per not in ("grasp", "config"):
             raise ValueError(f"per must be 'grasp' or 'config', not {per!r}")
         self.shards = [read_map_shard(p) for p in paths]
-        self.per, self.rotation, self.seed = per, rotation, int(seed)
+        self.per, self.rotation, self.seed, self.rotation_max = per, rotation, int(seed), float(rotation_max)
         self.index = [(s, r) for s, sh in enumerate(self.shards)
                       for r in range(sh.n_grasps if per == "grasp" else sh.n_configs)]
         random_rotation(np.random.default_rng(0), rotation)  # validates the mode
@@ -231,7 +244,7 @@ class MapDataset:
             item["grasp"] = sh.grasp[row].astype(np.float32)
             item["contact"] = sh.contact[row]
         if self.rotation != "none":
-            R = random_rotation(np.random.default_rng([self.seed, int(draw), i]), self.rotation)
+            R = random_rotation(np.random.default_rng([self.seed, int(draw), i]), self.rotation, self.rotation_max)
             item["points"] = (item["points"] @ R.T).astype(np.float32)
             item["normals"] = (item["normals"] @ R.T).astype(np.float32)
             item["scene"] = (item["scene"] @ R.T).astype(np.float32)

@@ -442,7 +442,8 @@ def model_checks(task: str, shard_paths: list[str | Path], checkpoints: dict[str
             log.info("%s/%s: %s", task, name, result[name])
             continue
         # the gap is measured on what the model was trained on: its own augmentation
-        seen = MapDataset(shard_paths, per="grasp", rotation=meta["training_config"]["rotation"], seed=seed)
+        seen = MapDataset(shard_paths, per="grasp", rotation=meta["training_config"]["rotation"], seed=seed,
+                          rotation_max=meta["training_config"].get("rotation_max", np.pi / 6))
         result[name] = {"kind": model.kind, "shuffled_condition": shuffled_condition_gap(model, seen, seed=seed)}
         if model.kind == "grasp_diffuser":
             result[name]["fit"] = grasp_fit(model, hand, plain, seed=seed)

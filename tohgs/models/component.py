@@ -90,7 +90,7 @@ def seen_grasps(model: Component, data, device: torch.device, min_samples: int =
                 ) -> torch.Tensor:
     """(G', D) the training grasps as the network sees them: augmented as in training (draws 0, 1, ...
     of every item of the :class:`tohgs.data.maps.MapDataset` ``data``, until ``min_samples`` or
-    ``max_draws``) and in the network's frame (``model.in_frame(grasp, points, contact)``). A grasp
+    ``max_draws``) and in the network's frame (``model.in_frame(grasp, points, contact, normals)``). A grasp
     normaliser is computed on these, not on the stored grasps, whose rotation the augmentation changes."""
     draws = 1 if data.rotation == "none" else min(max_draws, max(1, -(-min_samples // len(data))))
     out = []
@@ -99,5 +99,5 @@ def seen_grasps(model: Component, data, device: torch.device, min_samples: int =
             items = [data.item(i, draw) for i in range(len(data))]
             for k in range(0, len(items), 256):
                 chunk = Batch.collate(items[k:k + 256], device)
-                out.append(model.in_frame(chunk.grasp, chunk.points, chunk.contact))
+                out.append(model.in_frame(chunk.grasp, chunk.points, chunk.contact, chunk.normals))
     return torch.cat(out)

@@ -141,7 +141,8 @@ class GraspCVAE(Component):
         self.grasp_std.copy_(std.clamp_min(1e-3))
         self._training = {"hand": hand, "alpha_contact": data.shards[0].alpha_contact}
 
-    def in_frame(self, grasp: torch.Tensor, points: torch.Tensor, contact: torch.Tensor) -> torch.Tensor:
+    def in_frame(self, grasp: torch.Tensor, points: torch.Tensor, contact: torch.Tensor, normals: torch.Tensor
+                 ) -> torch.Tensor:
         """(B, 54) the grasps as the network regresses them: palm-centred 6D vectors of the network frame
         (:mod:`tohgs.geometry.rot6d`; what the normaliser measures)."""
         return palm_rot6d(grasp, self.wrist, self.palm)

@@ -13,14 +13,20 @@ xyz with (normal, contact). Two ways of reading the condition (``context``):
   the contact is instead of a summary of it. With ``contact_features`` the contact region's moments
   (:func:`contact_moments`) are added to the pooled feature.
 
-Two frames the grasp is expressed in (``frame``):
+Three frames the grasp is expressed in (``frame``):
 
 - ``"network"``: the map shards' frame (object cloud centred at the origin, z up).
 - ``"contact"``: a frame derived from the contact map itself: the origin at the contact-weighted centroid
   of the object points and the x axis turned (about z, so up stays up) towards the horizontal direction
   from the object's centre to that centroid. Points, normals and the grasp are expressed in it, so the
   network learns the hand's pose *relative to where it touches*, a residual, instead of the absolute pose;
-  an upright rotation of the input does not change what the network sees.
+  an upright rotation of the input does not change what the network sees, any other does.
+- ``"canonical"``: the same idea with all three axes from the inputs
+  (:func:`tohgs.geometry.frames.contact_frame_3d`: x from the object towards the contact, y along the
+  contact region), so that *any* rotation of the input leaves what the network sees unchanged and turns
+  the sampled hand with it: under the paper's SO(3)-augmented training the network need not learn
+  orientation invariance from data. Its origin (``origin``) is the contact-weighted centroid or the
+  object point nearest to it.
 
 What the network denoises (``representation``): the 51 numbers themselves (``"axis_angle"``, the paper's)
 or ``"palm_rot6d"``: the palm centre's position (3), the global rotation's first two columns (6, the
@@ -39,7 +45,10 @@ Losses (REFERENCE.md, official code), per sample then averaged over the batch:
 
 ``L = w_diff L_diff + w_recon mean_b min(L_recon, 1) + w_pen mean_b min(L_pen, 1) + w_cons mean_b L_cons``
 
-- ``L_diff``: squared error of the normalised vector, summed over its numbers;
+- ``L_diff``: squared error of the normalised vector, summed over its numbers (``diff_units: normalised``),
+  or of the vector in its own units, m and rad (``official``: the official code's sum-MSE of the raw numbers,
+  the units its loss weights were set for; the normalised error weighs the palm's position about 900x and
+  the fingers about 80x more against the hand terms);
 - ``L_recon``: squared distance of the predicted hand's vertices to the true hand's, summed over the
   vertices (m^2), as the official code;
 - ``L_pen``: object points inside the predicted hand (behind their nearest hand vertex's normal),
@@ -65,6 +74,7 @@ import torch
 from torch import nn
 
 from tohgs.data.batch import Batch
+from tohgs.geometry.frames import contact_frame_3d
 from tohgs.geometry.grasp import GRASP_DIM
 from tohgs.geometry.hand_object import contact_values, inside_hand, vertex_normals
 from tohgs.geometry.rot6d import grasp_from_palm_rot6d, palm_rot6d
@@ -79,7 +89,9 @@ LOSS_WEIGHTS = {"placing": (15.0, 1.0, 5.0, 0.002), "shelving": (15.0, 1.0, 5.0,
                 "stacking": (10.0, 1.0, 3.0, 0.005)}
 PAPER_POINTS = 2048  # the point sums of L_pen and L_cons are scaled to this many points
 CONTEXTS = ("global", "tokens")
-FRAMES = ("network", "contact")
+FRAMES = ("network", "contact", "canonical")
+ORIGINS = ("centroid", "surface")
+DIFF_UNITS = ("normalised", "official")
 ENCODERS = ("pointnet2", "pointnet")
 REPRESENTATIONS = ("axis_angle", "palm_rot6d")
 N_CONTACT_FEATURES = 10  # weighted mean normal (3), second moments of the points (6), log contact mass (1)
@@ -101,6 +113,8 @@ class GraspDiffuserConfig:
     frame: str = "contact"
     skip: bool = False
     contact_power: float = 2.0  # the contact frame's weights are c ** contact_power
+    origin: str = "centroid"  # the canonical frame's origin: the contact centroid or the object point nearest it
+    diff_units: str = "normalised"  # L_diff on the normalised vector, or "official": in the vector's own units
     encoder: str = "pointnet"  # or "pointnet2": PointNet++ of sizes ``pointnet`` (the paper's)
     representation: str = "palm_rot6d"  # or "axis_angle": the 51 numbers (the paper's)
     contact_features: bool = True  # the contact region's moments added to the pooled condition
@@ -117,6 +131,10 @@ class GraspDiffuserConfig:
             raise ValueError(f"GraspDiffuser context must be one of {CONTEXTS}, not {self.context!r}")
         if self.frame not in FRAMES:
             raise ValueError(f"GraspDiffuser frame must be one of {FRAMES}, not {self.frame!r}")
+        if self.origin not in ORIGINS:
+            raise ValueError(f"GraspDiffuser origin must be one of {ORIGINS}, not {self.origin!r}")
+        if self.diff_units not in DIFF_UNITS:
+            raise ValueError(f"GraspDiffuser diff_units must be one of {DIFF_UNITS}, not {self.diff_units!r}")
         if self.representation not in REPRESENTATIONS:
             raise ValueError(f"GraspDiffuser representation must be one of {REPRESENTATIONS}, not {self.representation!r}")
         if self.encoder not in ENCODERS:
@@ -188,8 +206,11 @@ def contact_frame(points: torch.Tensor, contact: torch.Tensor, power: float = 2.
 def contact_moments(points: torch.Tensor, normals: torch.Tensor, contact: torch.Tensor, power: float = 2.0
                     ) -> torch.Tensor:
     """(B, 10) the contact region in numbers: its weighted mean normal (3), the weighted second moments of
-    its points about their centroid (xx, yy, zz, xy, xz, yz, in cm^2), and the log of its total weight
-    (weights ``contact ** power``; points (B, N, 3) m, normals (B, N, 3), contact (B, N))."""
+    its points about their centroid (xx, yy, zz, xy, xz, yz, in cm^2), and the log of its mean weight over
+    the points, the share of the object in contact, which does not depend on how many points sample it
+    (weights ``contact ** power``; points (B, N, 3) m, normals (B, N, 3), contact (B, N)). (Until the
+    point-count fix it was the log of the summed weight: training on 256 of 512 points, that read every test
+    map as twice the contact.)"""
     w = contact.clamp_min(0) ** power
     total = w.sum(-1, keepdim=True).clamp_min(1e-6)
     wn = w / total
@@ -197,7 +218,8 @@ def contact_moments(points: torch.Tensor, normals: torch.Tensor, contact: torch.
     centred = (points - (wn[..., None] * points).sum(1, keepdim=True)) * 100.0  # cm
     xx, yy, zz = [(wn * centred[..., k] ** 2).sum(-1) for k in range(3)]
     xy, xz, yz = [(wn * centred[..., i] * centred[..., j]).sum(-1) for i, j in ((0, 1), (0, 2), (1, 2))]
-    return torch.cat([mean_normal, torch.stack([xx, yy, zz, xy, xz, yz], -1), total.log()], -1)
+    mean = w.mean(-1, keepdim=True).clamp_min(1e-6 / w.shape[-1])
+    return torch.cat([mean_normal, torch.stack([xx, yy, zz, xy, xz, yz], -1), mean.log()], -1)
 
 
 def grasp_to_frame(grasp: torch.Tensor, rotation: torch.Tensor, origin: torch.Tensor, wrist: torch.Tensor) -> torch.Tensor:
@@ -376,30 +398,35 @@ class GraspDiffuser(Component):
     def denormalise(self, x: torch.Tensor) -> torch.Tensor:
         return x * self.grasp_std + self.grasp_mean
 
-    def frame_of(self, points: torch.Tensor, contact: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(rotation (B, 3, 3), origin (B, 3))`` of the network's frame for (B, N, 3) points with their
-        (B, N) contact map: :func:`contact_frame`, or the identity for ``frame="network"``."""
+    def frame_of(self, points: torch.Tensor, normals: torch.Tensor, contact: torch.Tensor
+                 ) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(rotation (B, 3, 3), origin (B, 3))`` of the network's frame for (B, N, 3) points and normals
+        with their (B, N) contact map: :func:`contact_frame` (a turn about z), the rotation-equivariant
+        :func:`tohgs.geometry.frames.contact_frame_3d` (``"canonical"``), or the identity (``"network"``)."""
         if self.cfg.frame == "contact":
             return contact_frame(points, contact, self.cfg.contact_power)
+        if self.cfg.frame == "canonical":
+            return contact_frame_3d(points, normals, contact, self.cfg.contact_power, self.cfg.origin)
         b = points.shape[0]
         return (torch.eye(3, dtype=points.dtype, device=points.device).expand(b, 3, 3),
                 torch.zeros(b, 3, dtype=points.dtype, device=points.device))
 
     def _framed_vector(self, grasp: torch.Tensor, rotation: torch.Tensor, origin: torch.Tensor) -> torch.Tensor:
         """(B, 51) network-frame grasps -> (B, D) unnormalised vectors in the frame (rotation, origin)."""
-        if self.cfg.frame == "contact":
+        if self.cfg.frame != "network":
             grasp = grasp_to_frame(grasp, rotation, origin, self.wrist)
         return self.vector_of(grasp)
 
-    def in_frame(self, grasp: torch.Tensor, points: torch.Tensor, contact: torch.Tensor) -> torch.Tensor:
+    def in_frame(self, grasp: torch.Tensor, points: torch.Tensor, contact: torch.Tensor, normals: torch.Tensor
+                 ) -> torch.Tensor:
         """(B, 51) network-frame grasps as (B, D) unnormalised vectors in the network's frame (what the
-        normaliser measures)."""
-        return self._framed_vector(grasp, *self.frame_of(points, contact))
+        normaliser measures), for (B, N, 3) points, (B, N) contact maps and (B, N, 3) normals."""
+        return self._framed_vector(grasp, *self.frame_of(points, normals, contact))
 
     def condition(self, points: torch.Tensor, normals: torch.Tensor, contact: torch.Tensor | None) -> GraspCondition:
         """The condition of (B, N, 3) points with (B, N, 3) normals and their (B, N) contact map (not read,
         and may be None, without ``contact_input``)."""
-        rot, origin = self.frame_of(points, contact)
+        rot, origin = self.frame_of(points, normals, contact)
         points = (points - origin[:, None]) @ rot  # x' = R^T (x - o), as row vectors
         normals = normals @ rot
         extra = [contact[..., None]] if self.cfg.contact_input else []
@@ -423,7 +450,7 @@ class GraspDiffuser(Component):
     def decode(self, x: torch.Tensor, cond: GraspCondition) -> torch.Tensor:
         """The inverse of :meth:`encode`: (B, D) normalised vectors -> network-frame grasps (B, 51)."""
         grasp = self.in_frame_grasp(x)
-        if self.cfg.frame == "contact":
+        if self.cfg.frame != "network":
             grasp = grasp_from_frame(grasp, cond.rotation, cond.origin, self.wrist)
         return grasp
 
@@ -467,7 +494,10 @@ def grasp_losses(model: GraspDiffuser, hand: HandModel, x0_hat: torch.Tensor, x0
     network's frame) with their true contact map (B, N)."""
     points = cond.points
     scale = PAPER_POINTS / points.shape[1]
-    l_diff = ((x0_hat - x0) ** 2).sum(-1)
+    err = x0_hat - x0
+    if model.cfg.diff_units == "official":  # in the vector's own units (m, rad): the official code's balance
+        err = err * model.grasp_std
+    l_diff = (err ** 2).sum(-1)
     pred_v = hand(model.in_frame_grasp(x0_hat)).vertices
     with torch.no_grad():
         true_v = hand(model.in_frame_grasp(x0)).vertices

@@ -45,12 +45,14 @@ class TrainSettings:
     warmup: int = 100
     ema_decay: float = 0.995
     rotation: str = "so3"
+    rotation_max: float = 0.5236  # rad: the largest turn of rotation "bounded" (ContactGen's 30 degrees)
     checkpoint_every: int = 250
     log_every: int = 50
     seed: int = 0
     threads: int = 1
     device: str = "auto"
     train_points: int = 256  # a random subset of the N points per batch (0: all); the networks are per point
+    clip_grad: float = 1.0  # the gradient's norm is clipped to this (0: no clipping, the official diffusers)
 
 
 def cosine_with_warmup(optimizer: torch.optim.Optimizer, warmup: int, total: int) -> torch.optim.lr_scheduler.LambdaLR:
@@ -139,7 +141,7 @@ def train_component(component: str, kind: str, task: str, shard_paths: list[str 
     torch.set_num_threads(max(1, s.threads))
     device = pick_device(s.device)
     torch.manual_seed(s.seed)
-    data = MapDataset(shard_paths, per="grasp", rotation=s.rotation, seed=s.seed)
+    data = MapDataset(shard_paths, per="grasp", rotation=s.rotation, seed=s.seed, rotation_max=s.rotation_max)
     if len(data) == 0:
         raise ValueError(f"{task}/{component}: the training shards {list(map(str, shard_paths))} hold no task grasps")
     model = build_component(kind, network).to(device)
@@ -183,7 +185,8 @@ def train_component(component: str, kind: str, task: str, shard_paths: list[str 
         if (step + 1) % s.log_every == 0 and any(k.startswith("w_") for k in losses):
             losses.update(gradient_shares(model, losses))
         losses["loss"].backward()
-        torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+        if s.clip_grad > 0:
+            torch.nn.utils.clip_grad_norm_(model.parameters(), s.clip_grad)
         opt.step()
         lr_sched.step()
         ema.step(model.parameters())
