@@ -123,7 +123,8 @@ def test_a_config_adds_methods_and_tables_to_the_built_in_ones_and_fills_their_d
     gd = cfg["components"]["grasp_diffuser"]
     # a built-in entry overlaid: the keys the config does not give come from the built-in one
     assert gd["network"]["d_model"] == 32 and gd["network"]["n_blocks"] == 3 and gd["training"]["steps"] == 2400
-    assert cfg["components"]["contact_diffuser"]["training"] == {"steps": 800, "batch": 16}  # the built-in entry
+    assert cfg["components"]["contact_diffuser"]["training"] == {"steps": 800, "batch": 16, "train_points": 0,
+                                                                  "clip_grad": 0.0}  # the built-in entry
 
 
 def test_the_settings_dataclasses_default_to_the_schema():
@@ -213,7 +214,8 @@ def test_an_import_without_ground_truth_leaves_out_exactly_the_rows_that_read_it
 
 def test_the_upright_overlay_adds_an_upright_row_and_leaves_the_faithful_one_in_so3(repo):
     """config/upright.yaml over the default: `ours-upright`'s two components train about z only, with the
-    faithful components' steps and batches; `ours` and every built-in component keep the default SO(3)."""
+    faithful components' steps and batches, in frames that keep the object's orientation (a canonical frame
+    would cancel it); `ours` and every built-in component keep the default SO(3) and canonical frames."""
     from tohgs.methods import method_components
 
     with open(repo / "config/config.yaml") as fh:
@@ -227,7 +229,9 @@ def test_the_upright_overlay_adds_an_upright_row_and_leaves_the_faithful_one_in_
     faithful = method_components(methods["ours"], comps)
     assert sorted(upright) == ["contact_diffuser_z", "grasp_diffuser_z"]
     for z, so3 in zip(sorted(upright), sorted(faithful)):
-        assert comps[z]["kind"] == comps[so3]["kind"] and comps[z]["network"] == comps[so3]["network"]
+        assert comps[z]["kind"] == comps[so3]["kind"]
+        assert {**comps[z]["network"], "frame": None} == {**comps[so3]["network"], "frame": None}
+        assert comps[z]["network"]["frame"] in ("network", "contact") and comps[so3]["network"]["frame"] == "canonical"
         assert {**comps[z]["training"], "rotation": None} == {**comps[so3]["training"], "rotation": None}
         assert comps[z]["training"]["rotation"] == "z" and "rotation" not in comps[so3]["training"]
     assert cfg["tables"]["upright"]["rows"] == ["ours", "ours-upright", "ours-gt-contact"]

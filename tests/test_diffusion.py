@@ -383,3 +383,18 @@ def test_neighbour_mean_and_max_equal_the_gathered_reduction():
         mean, top = neighbour_mean_max(x, idx)
     torch.testing.assert_close(mean, ref_mean.detach(), atol=1e-6, rtol=0)
     torch.testing.assert_close(top, ref_max.detach(), atol=0, rtol=0)
+
+
+def test_grasp_diffuser_attention_with_cached_keys_equals_multihead_attention():
+    """The grasp token's cross-attention, its keys and values projected once per condition, gives
+    torch.nn.MultiheadAttention's result with the same weights."""
+    from tohgs.models.grasp_diffuser import _Block
+
+    torch.manual_seed(0)
+    block = _Block(32, 2, 0.0, 4, tokens=True).eval()
+    h, c, tokens = torch.randn(5, 32), torch.randn(5, 32), torch.randn(5, 40, 32)
+    with torch.no_grad():
+        ours = block(h, c, block.keys_values(tokens))
+        mid = h + block.mlp(h + c)
+        ref = mid + block.attn(block.norm(mid)[:, None], tokens, tokens, need_weights=False)[0][:, 0]
+    torch.testing.assert_close(ours, ref, atol=1e-5, rtol=1e-5)

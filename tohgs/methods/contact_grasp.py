@@ -31,10 +31,14 @@ from tohgs.settings import block
 
 @dataclass(frozen=True)
 class ContactGraspSettings(GeneratorSettings):
-    """A generator's sampling settings and ``steer``, the scene-aware guidance of its sampling (beyond the
-    paper; every lever off by default). A job is not given ``steer`` while it changes nothing (so that its
-    settings are those of before it existed): its defaults then."""
+    """A generator's sampling settings (``sampler`` and ``steps`` the contact component's), the grasp
+    generator's sampler (``grasp_sampler``, ``grasp_steps``: the official ancestral DDPM over all 1000 steps
+    by default) and ``steer``, the scene-aware guidance of its sampling (beyond the paper; every lever off by
+    default). A job is not given ``steer`` while it changes nothing (so that its settings are those of before
+    it existed): its defaults then."""
 
+    grasp_sampler: str = "ddpm"
+    grasp_steps: int = 1000
     steer: GuidanceSettings = block(GuidanceSettings, optional=True)
 
 
@@ -91,7 +95,8 @@ class ContactGrasp(Method):
         if self.steer.selects:  # candidates x S copies of the configuration
             batch = batch.index(torch.zeros(s.samples * self.steer.candidates, dtype=torch.long, device=batch.device))
         if not self.source.reads_maps:
-            grasp = self.grasp_model.sample_grasps(batch, s.sampler, s.steps, generator, s.guidance, **self._steer())
+            grasp = self.grasp_model.sample_grasps(batch, s.grasp_sampler, s.grasp_steps, generator, s.guidance,
+                                                   **self._steer())
             t1 = time.perf_counter()
             with torch.no_grad():
                 contact, _ = contact_values(batch.points, self.hand(grasp).vertices, shard.alpha_contact)
@@ -104,7 +109,7 @@ class ContactGrasp(Method):
             if len(contact) == 0:  # ground truth, and the configuration has no task grasp
                 return None
             t1 = time.perf_counter()
-            grasp = self.grasp_model.sample_grasps(batch.with_contact(contact), s.sampler, s.steps, generator,
+            grasp = self.grasp_model.sample_grasps(batch.with_contact(contact), s.grasp_sampler, s.grasp_steps, generator,
                                                    s.guidance, **self._steer())
             seconds = {"contact_map": t1 - t0, "grasp": time.perf_counter() - t1}
         info = {}

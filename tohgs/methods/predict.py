@@ -145,6 +145,8 @@ def predict(task: str, name: str, method: dict[str, Any], test_shards: list[str 
                                "diagnostics": {k: [None if np.isnan(x) else x for x in v] for k, v in diagnostics.items()}},
                       out)
     sampler = f" ({s.sampler}, {s.steps} steps)" if isinstance(s, GeneratorSettings) else ""
+    if hasattr(s, "grasp_sampler"):
+        sampler += f" (grasps: {s.grasp_sampler}, {s.grasp_steps} steps)"
     log.info("%s/%s: %d configurations x %d grasps (%d skipped, %d grasps discarded); %s%s", task, name, n,
              s.samples, skipped, discarded, ", ".join(f"{k} {v:.3f} s" for k, v in timing.items()) or "no timing",
              sampler)

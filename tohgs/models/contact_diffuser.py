@@ -50,7 +50,7 @@ class ContactDiffuserConfig:
     ff_mult: int = 2
     dropout: float = 0.0
     local_k: int = 0
-    frame: str = "network"  # or "canonical": points and normals in the scene frame of the inputs
+    frame: str = "canonical"  # points and normals in the scene frame of the inputs; "network": as given
     pointnet: dict = field(default_factory=lambda: {
         "sa": [[128, 0.02, 16, [32, 32, 64]], [32, 0.05, 16, [64, 64, 128]], [0, 0.0, 0, [128, 128]]],
         "fp": [[128], [96], [64]]})

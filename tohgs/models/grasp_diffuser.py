@@ -110,11 +110,11 @@ class GraspDiffuserConfig:
     dropout: float = 0.0
     n_heads: int = 4
     context: str = "tokens"
-    frame: str = "contact"
+    frame: str = "canonical"
     skip: bool = False
     contact_power: float = 2.0  # the contact frame's weights are c ** contact_power
     origin: str = "centroid"  # the canonical frame's origin: the contact centroid or the object point nearest it
-    diff_units: str = "normalised"  # L_diff on the normalised vector, or "official": in the vector's own units
+    diff_units: str = "official"  # L_diff in the vector's own units (m, rad), or "normalised": on the normalised one
     encoder: str = "pointnet"  # or "pointnet2": PointNet++ of sizes ``pointnet`` (the paper's)
     representation: str = "palm_rot6d"  # or "axis_angle": the 51 numbers (the paper's)
     contact_features: bool = True  # the contact region's moments added to the pooled condition
@@ -160,6 +160,8 @@ class GraspCondition:
         rotation: (B, 3, 3) the frame's axes in the network frame (columns); identity for ``"network"``.
         origin: (B, 3) the frame's origin in the network frame, m; zeros for ``"network"``.
         points: (B, N, 3) the object points in the frame, m (the hand losses compare hands to them).
+        keys_values: per block, the tokens' attention keys and values ((B, heads, N, d_model / heads) each),
+            projected once and reused by every denoising step (None: not yet; the network fills it in).
     """
 
     glob: torch.Tensor
@@ -167,6 +169,7 @@ class GraspCondition:
     rotation: torch.Tensor
     origin: torch.Tensor
     points: torch.Tensor
+    keys_values: list[tuple[torch.Tensor, torch.Tensor]] | None = None
 
     def expand(self, n: int) -> "GraspCondition":
         """The condition of one object repeated for ``n`` samples (every field has batch 1)."""
@@ -252,11 +255,29 @@ class _Block(nn.Module):
         self.attn = nn.MultiheadAttention(d, heads, dropout=dropout, batch_first=True) if tokens else None
         self.norm = nn.LayerNorm(d) if tokens else None
 
-    def forward(self, h: torch.Tensor, c: torch.Tensor, tokens: torch.Tensor | None) -> torch.Tensor:
+    def keys_values(self, tokens: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The attention's keys and values of (B, N, d) tokens, each (B, heads, N, d / heads): the projections
+        of :class:`torch.nn.MultiheadAttention`'s own weights, computed once per condition."""
+        d, heads = self.attn.embed_dim, self.attn.num_heads
+        w, bias = self.attn.in_proj_weight, self.attn.in_proj_bias
+        b, n = tokens.shape[:2]
+        k = nn.functional.linear(tokens, w[d:2 * d], bias[d:2 * d]).view(b, n, heads, d // heads).transpose(1, 2)
+        v = nn.functional.linear(tokens, w[2 * d:], bias[2 * d:]).view(b, n, heads, d // heads).transpose(1, 2)
+        return k, v
+
+    def forward(self, h: torch.Tensor, c: torch.Tensor, kv: tuple[torch.Tensor, torch.Tensor] | None) -> torch.Tensor:
+        """(B, d) token updated with the (B, d) condition and, with tokens, attention to their keys and values
+        (:meth:`keys_values`): :class:`torch.nn.MultiheadAttention`'s computation with the tokens' projections
+        reused across denoising steps (the same numbers, to float rounding)."""
         h = h + self.mlp(h + c)
         if self.attn is not None:
-            q = self.norm(h)[:, None]  # (B, 1, d): the grasp token asks the object tokens
-            h = h + self.attn(q, tokens, tokens, need_weights=False)[0][:, 0]
+            d, heads = self.attn.embed_dim, self.attn.num_heads
+            w, bias = self.attn.in_proj_weight, self.attn.in_proj_bias
+            q = nn.functional.linear(self.norm(h), w[:d], bias[:d]).view(-1, heads, 1, d // heads)
+            k, v = kv
+            drop = self.attn.dropout if self.training else 0.0
+            o = nn.functional.scaled_dot_product_attention(q, k, v, dropout_p=drop)  # (B, heads, 1, d / heads)
+            h = h + self.attn.out_proj(o.reshape(-1, d))
         return h
 
 
@@ -478,8 +499,10 @@ class GraspDiffuser(Component):
         """Predict the normalised vector x0 (B, D) from ``x_t`` (B, D), timesteps (B,) and the condition."""
         c = cond.glob + self.time(t)
         h = self.inp(x_t)
-        for block in self.blocks:
-            h = block(h, c, cond.tokens)
+        if cond.tokens is not None and cond.keys_values is None:
+            cond.keys_values = [block.keys_values(cond.tokens) for block in self.blocks]
+        for i, block in enumerate(self.blocks):
+            h = block(h, c, None if cond.tokens is None else cond.keys_values[i])
         out = self.out(h)
         if self.cfg.skip:
             a = self.alphas_cumprod.to(x_t.device)[t][:, None]
