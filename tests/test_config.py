@@ -116,9 +116,9 @@ def test_a_config_adds_methods_and_tables_to_the_built_in_ones_and_fills_their_d
                            "tables": {"samplers": {"rows": ["ours", "ours-ddpm"]}},
                            "components": {"grasp_diffuser": {"kind": "grasp_diffuser", "network": {"d_model": 32}}}})
     assert set(cfg["methods"]) == {"dataset", "ours", "ours-gt-contact", "grasptta", "f-grasptta", "m-grasptta-ta",
-                                   "m-grasptta-gt", "m-grasptta-oc", "contactgen", "contactgen-gt", "cc-gd", "scenediffuser",
+                                   "m-grasptta-gt", "m-grasptta-oc", "contactgen", "cc-gd", "scenediffuser",
                                    "flex", "ours-ddpm"}
-    assert set(cfg["tables"]) == {"table1", "table2", "table4", "table5", "table_contactgen_gate", "samplers"}
+    assert set(cfg["tables"]) == {"table1", "table2", "table4", "table5", "samplers"}
     assert cfg["tables"]["samplers"]["columns"][-1] == "discarded" and cfg["tables"]["samplers"]["pending"] == []
     gd = cfg["components"]["grasp_diffuser"]
     # a built-in entry overlaid: the keys the config does not give come from the built-in one
@@ -183,7 +183,7 @@ def test_every_network_key_has_description_and_default():
             assert "description" in leaf and "default" in leaf, f"$defs.networks.{kind}.{'.'.join(parts)}"
 
 
-def test_an_import_without_ground_truth_leaves_out_exactly_the_rows_that_read_it(default_config):
+def test_an_import_without_ground_truth_leaves_out_exactly_the_rows_that_read_it(default_config, repo):
     """drop_ground_truth_rows: the Dataset row (kind reference), the GT-contact rows (contact: ground_truth)
     and a filtered method of one of them become pending rows with the reason, under the table's own label;
     every other row stays, in order; a table of ground-truth rows only is refused."""
@@ -191,14 +191,16 @@ def test_an_import_without_ground_truth_leaves_out_exactly_the_rows_that_read_it
     from tohgs.methods import reads_ground_truth
 
     cfg = copy.deepcopy(default_config)
+    with open(repo / "config/extras.yaml") as fh:  # the ContactGen gate's method and table
+        merge(cfg, yaml.safe_load(fh))
     validate_config(cfg)  # the defaults filled in
     cfg["methods"]["f-gt"] = {"label": "F-GT", "kind": "filtered", "of": "m-grasptta-gt", "settings": {}}
     cfg["tables"]["table2"]["rows"].append("f-gt")
     cfg["figures"]["comparisons"] = {"gt": ["dataset"], "mixed": ["ours", "ours-gt-contact"]}
-    assert [m for m in cfg["methods"] if reads_ground_truth(m, cfg["methods"])] == [
-        "dataset", "ours-gt-contact", "m-grasptta-gt", "contactgen-gt", "f-gt"]
+    assert {m for m in cfg["methods"] if reads_ground_truth(m, cfg["methods"])} == {
+        "dataset", "ours-gt-contact", "m-grasptta-gt", "contactgen-gt", "f-gt"}
     dropped = drop_ground_truth_rows(cfg, "no truth here")
-    assert dropped == ["dataset", "ours-gt-contact", "m-grasptta-gt", "f-gt", "contactgen-gt"]
+    assert dropped == ["dataset", "ours-gt-contact", "contactgen-gt", "m-grasptta-gt", "f-gt"]  # in the tables' order
     assert cfg["tables"]["table_contactgen_gate"]["rows"] == ["contactgen"]
     assert cfg["tables"]["table1"]["rows"] == ["grasptta", "f-grasptta", "contactgen", "scenediffuser", "flex", "ours"]
     assert cfg["tables"]["table1"]["pending"] == [{"label": "Dataset", "reason": "no truth here"},
@@ -210,6 +212,53 @@ def test_an_import_without_ground_truth_leaves_out_exactly_the_rows_that_read_it
     cfg["tables"]["truth"] = {"rows": ["dataset"], "pending": []}
     with pytest.raises(ConfigError, match="tables.truth.rows"):
         drop_ground_truth_rows(cfg, "no truth here")
+
+
+EXTRA_COLUMNS = {"sd_robust", "sd_pass", "sd_unstable", "sd_palm_avg", "qr_palm"}
+
+
+def _overlaid(repo, *files: str) -> dict:
+    """The validated config of config/config.yaml with the given overlays (paths from the repository root)."""
+    with open(repo / "config/config.yaml") as fh:
+        cfg = yaml.safe_load(fh) or {}
+    for f in files:
+        with open(repo / f) as fh:
+            merge(cfg, yaml.safe_load(fh))
+    return validate_config(cfg, base_dir=repo)
+
+
+def test_the_default_has_no_extras_and_the_extras_overlay_adds_them_all(repo):
+    """The beyond-paper diagnostics (robust SD, palm SD, ContactGen's gate, ContactGen in SO(3)) are out of the
+    default run: no method is listed for them, no table has their rows or columns; config/extras.yaml adds
+    every one, and keeps Table 1's rows."""
+    default, extras = _overlaid(repo), _overlaid(repo, "config/extras.yaml")
+    ev = default["evaluation"]
+    assert ev["palm_sd"] is False and ev["robust_sd"]["methods"] == []
+    assert not {"contactgen-gt", "contactgen-so3"} & set(default["methods"])
+    assert not {"table_contactgen_gate", "table_contactgen_rotation"} & set(default["tables"])
+    assert not any(EXTRA_COLUMNS & set(t["columns"]) for t in default["tables"].values())
+    ev = extras["evaluation"]
+    assert ev["palm_sd"] == ["dataset", "ours"] and ev["robust_sd"]["methods"] == ["dataset", "ours"]
+    assert EXTRA_COLUMNS <= set(extras["tables"]["table1"]["columns"])
+    assert extras["tables"]["table1"]["rows"] == default["tables"]["table1"]["rows"]
+    assert extras["tables"]["table_contactgen_gate"]["rows"] == ["dataset", "contactgen-gt", "contactgen"]
+    assert extras["tables"]["table_contactgen_rotation"]["rows"] == ["contactgen", "contactgen-so3"]
+    assert extras["components"]["contact_gen_so3"]["training"]["rotation"] == "so3"
+    assert default["components"]["contact_gen"]["training"]["rotation"] == "bounded"  # ContactGen's own recipe
+
+
+def test_the_smoke_run_covers_the_extras(repo):
+    """The smoke config (.test/config/config.yaml) runs config/extras.yaml's diagnostics, so that CI exercises
+    them: its palm SD methods, the gate's method and table, and Table 1's extra columns are the overlay's."""
+    with open(repo / "config/extras.yaml") as fh:
+        extras = yaml.safe_load(fh)
+    with open(repo / ".test/config/config.yaml") as fh:
+        smoke = yaml.safe_load(fh)
+    assert smoke["evaluation"]["palm_sd"] == extras["evaluation"]["palm_sd"]
+    assert smoke["evaluation"]["robust_sd"]["methods"]  # a cheap robust SD of its own
+    assert smoke["methods"]["contactgen-gt"] == extras["methods"]["contactgen-gt"]
+    assert smoke["tables"]["table_contactgen_gate"] == extras["tables"]["table_contactgen_gate"]
+    assert smoke["tables"]["table1"]["columns"] == extras["tables"]["table1"]["columns"]
 
 
 def test_the_upright_overlay_adds_an_upright_row_and_leaves_the_faithful_one_in_so3(repo):

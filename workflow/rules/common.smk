@@ -448,8 +448,8 @@ def claims_metrics(wildcards):
 
 def viewer_methods():
     """The methods the viewer's static export draws: every table's rows (they are evaluated), in first-use order
-    (the tables in the config's order: the built-in ones first, table1 to table5, then table_contactgen_gate,
-    which sorts after them, so a config file with its keys sorted draws them in the same order)."""
+    (the tables in the config's order: the built-in ones first, table1 to table5, then those a config file
+    adds, such as config/extras.yaml's)."""
     return list(dict.fromkeys(m for t in TABLES.values() for m in t["rows"]))
 
 
