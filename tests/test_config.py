@@ -247,6 +247,19 @@ def test_the_default_has_no_extras_and_the_extras_overlay_adds_them_all(repo):
     assert default["components"]["contact_gen"]["training"]["rotation"] == "bounded"  # ContactGen's own recipe
 
 
+def test_a_grasp_diffuser_without_a_frame_trains_on_the_normalised_vector(repo):
+    """The official units (m, rad) balance the loss only in a frame that centres the hand on its contact: a
+    GraspDiffuser that reads the object with no frame (SceneDiffuser's) learnt no palm position in them (its
+    hands 10 cm off the object, docs/baselines.md), so every default one with `frame: network` uses
+    `diff_units: normalised`, and Ours' GraspDiffuser keeps the canonical frame with the official units."""
+    default = _overlaid(repo)
+    frameless = {name: c["network"]["diff_units"] for name, c in default["components"].items()
+                 if c["kind"] == "grasp_diffuser" and c["network"]["frame"] == "network"}
+    assert frameless == {"scene_diffuser": "normalised"}
+    gd = default["components"]["grasp_diffuser"]["network"]
+    assert (gd["frame"], gd["diff_units"]) == ("canonical", "official")
+
+
 def test_the_smoke_run_covers_the_extras(repo):
     """The smoke config (.test/config/config.yaml) runs config/extras.yaml's diagnostics, so that CI exercises
     them: its palm SD methods, the gate's method and table, and Table 1's extra columns are the overlay's."""
