@@ -121,6 +121,19 @@ def test_a_store_with_a_missing_or_emptied_chunk_is_refused_by_name(built, tmp_p
             read(path)
 
 
+@pytest.mark.parametrize("array", ["grasp_init", "grasp_goal"])
+def test_a_prediction_store_with_non_finite_grasps_is_refused_by_name(tmp_path, array):
+    """NaN goal grasps once passed (only the initial ones were checked) and scored goal OPP 0."""
+    arrays = {"object_id": np.zeros(1, np.int32), "config_index": np.zeros(1, np.int32),
+              "contact": np.full((1, 2, 8), 0.5, np.float32), "grasp_init": np.ones((1, 2, 51), np.float32),
+              "grasp_goal": np.ones((1, 2, 51), np.float32), "kept": np.ones((1, 2), bool)}
+    attrs = {"task": "placing", "method": "ours", "objects": ["brick-cube"]}
+    write_predictions(arrays, attrs, tmp_path / "ok.zarr")  # finite: written
+    arrays[array][0, 1, 3] = np.nan
+    with pytest.raises(ValueError, match=rf"non-finite grasps in '{array}'"):
+        write_predictions(arrays, attrs, tmp_path / "bad.zarr")
+
+
 def test_a_store_without_a_manifest_is_refused(built, tmp_path):  # noqa: F811
     import zarr
 

@@ -45,8 +45,9 @@ def _validate(a: dict[str, np.ndarray], source: str) -> None:
     expect = {"object_id": (c,), "config_index": (c,), "contact": (c, s, n), "grasp_init": (c, s, GRASP_DIM),
               "grasp_goal": (c, s, GRASP_DIM), "kept": (c, s)}
     check_shapes(a, expect, source)
-    if not np.isfinite(a["grasp_init"]).all():
-        raise ValueError(f"{source}: non-finite grasps")
+    for name in ("grasp_init", "grasp_goal"):  # a NaN goal grasp would score OPP 0 at the goal
+        if not np.isfinite(a[name]).all():
+            raise ValueError(f"{source}: non-finite grasps in '{name}'")
 
 
 LAYOUT = StoreLayout(SCHEMA, SCHEMA_VERSION, "prediction store", _ARRAYS, _validate)
