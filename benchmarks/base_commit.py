@@ -13,6 +13,7 @@ from __future__ import annotations
 import atexit
 import importlib
 import io
+import platform
 import re
 import shutil
 import subprocess
@@ -67,3 +68,15 @@ def commit_label() -> str:
         return head + ("-dirty" if dirty else "")
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
+
+
+def cpu_name() -> str:
+    """The CPU's model name (``/proc/cpuinfo``, else :func:`platform.processor`): machines of one kind differ
+    1.5-1.7x in speed, so a benchmark's JSON names the CPU it ran on."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor()

@@ -39,6 +39,9 @@ from tohgs.grasps.filter import CHECKS, SCREEN_KEYS
 from tohgs.grasps.prior import filter_prior_grasps, make_prior_grasps
 from tohgs.hand import load_hand
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from base_commit import cpu_name  # noqa: E402
+
 REPO = Path(__file__).resolve().parent.parent
 
 #: The synthesis settings that differ in the default config at 557fbf2 (the "before" variant).
@@ -48,13 +51,11 @@ BEFORE = {"iterations": 300, "refine_iterations": 200, "step_decay_every": 8, "t
 
 def machine() -> dict:
     """The machine and the checkout the numbers come from."""
-    cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
-                if line.startswith("model name")), platform.processor()) if Path("/proc/cpuinfo").exists() else platform.processor()
 
     def git(*a: str) -> str:
         return subprocess.run(["git", *a], cwd=REPO, capture_output=True, text=True).stdout.strip()
 
-    return {"machine": platform.machine(), "cpu": cpu, "cpus": os.cpu_count(), "load_avg_start": os.getloadavg()[0],
+    return {"machine": platform.machine(), "cpu": cpu_name(), "cpus": os.cpu_count(), "load_avg_start": os.getloadavg()[0],
             "commit": git("rev-parse", "HEAD"), "dirty": bool(git("status", "--porcelain", "--untracked-files=no")),
             "torch": torch.__version__}
 

@@ -20,11 +20,15 @@ import json
 import platform
 import re
 import subprocess
+import sys
 from collections import defaultdict
 from datetime import datetime
 from pathlib import Path
 
 import pandas as pd
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from base_commit import cpu_name  # noqa: E402
 
 
 def job_seconds(tsv: Path) -> float:
@@ -133,17 +137,6 @@ def core_use(jobs: list[dict], cores: int) -> dict:
     held = sum((j["end"] - j["start"]).total_seconds() * j["threads"] for j in jobs) / 60
     return {"jobs": len(jobs), "span_minutes": round(span, 1), "cores": cores, "core_minutes_held": round(held, 1),
             "core_minutes_idle": round(cores * span - sum(min(u, cores) for u in use), 1)}
-
-
-def cpu_name() -> str:
-    """The CPU's model name (``/proc/cpuinfo``): machines of one kind differ 1.5-1.7x in speed."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor()
 
 
 def main() -> None:

@@ -280,11 +280,7 @@ def test_the_upright_overlay_adds_an_upright_row_and_leaves_the_faithful_one_in_
     would cancel it); `ours` and every built-in component keep the default SO(3) and canonical frames."""
     from tohgs.methods import method_components
 
-    with open(repo / "config/config.yaml") as fh:
-        cfg = yaml.safe_load(fh)
-    with open(repo / "config/upright.yaml") as fh:
-        merge(cfg, yaml.safe_load(fh))
-    cfg = validate_config(cfg, base_dir=repo)
+    cfg = _overlaid(repo, "config/upright.yaml")
     comps, methods = cfg["components"], cfg["methods"]
     assert cfg["training"]["rotation"] == "so3"
     upright = method_components(methods["ours-upright"], comps)
@@ -303,11 +299,7 @@ def test_the_adaptation_overlay_adds_m_grasptta_rows_without_their_adaptation(re
     """config/adaptation.yaml over the default: the two coarse rows are M-GraspTTA (TA) and (GT) with the
     adaptation's steps at 0 and everything else theirs (the same components, maps and sampling), and the
     adapted rows keep the default's adaptation."""
-    with open(repo / "config/config.yaml") as fh:
-        cfg = yaml.safe_load(fh)
-    with open(repo / "config/adaptation.yaml") as fh:
-        merge(cfg, yaml.safe_load(fh))
-    cfg = validate_config(cfg, base_dir=repo)
+    cfg = _overlaid(repo, "config/adaptation.yaml")
     methods = cfg["methods"]
     for source in ("ta", "gt"):
         coarse, adapted = methods[f"m-grasptta-{source}-coarse"], methods[f"m-grasptta-{source}"]
