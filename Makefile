@@ -6,13 +6,18 @@ PYTHON ?= python3
 VENV ?= .venv
 CORES ?= 2
 TARGET ?= all
+# config files merged over the default, in order (e.g. make reproduce CONFIG=config/extras.yaml): each is
+# checked first (python -m tohgs.config_files), since Snakemake merges them before the workflow's checks run
+CONFIG ?=
 PY := $(VENV)/bin/python
-SNAKEMAKE := $(PY) -m snakemake
+SNAKEMAKE := $(PY) -m snakemake$(if $(strip $(CONFIG)), --configfile $(CONFIG))
+CHECK_CONFIG := $(if $(strip $(CONFIG)),$(PY) -m tohgs.config_files $(CONFIG),@true)
 STAMP := $(VENV)/.tohgs-setup
 
 .PHONY: reproduce test test-fast setup browser lint dryrun benchmark report clean
 
 reproduce: $(STAMP)
+	$(CHECK_CONFIG)
 	$(SNAKEMAKE) --cores $(CORES) $(TARGET)
 
 test: $(STAMP) browser
@@ -57,6 +62,7 @@ browser:
 
 # the HTML report of a finished run: tables and figures with their captions (workflow/report/)
 report: $(STAMP)
+	$(CHECK_CONFIG)
 	$(SNAKEMAKE) --report results/report.html $(TARGET)
 
 benchmark: $(STAMP)

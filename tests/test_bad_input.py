@@ -186,12 +186,13 @@ def test_a_damaged_urdf_or_a_folder_without_checksums_stops_the_simulator(brick_
 
 
 def test_a_file_is_hashed_once_per_process(brick_folder, tmp_path, monkeypatch):
+    import tohgs.io
     from tohgs.assets import manifest
 
     folder = _copy_folder(brick_folder, tmp_path)
     calls = []
-    real = manifest.hashlib.sha256
-    monkeypatch.setattr(manifest.hashlib, "sha256", lambda *a: calls.append(1) or real(*a))
+    real = tohgs.io.hashlib.sha256
+    monkeypatch.setattr(tohgs.io.hashlib, "sha256", lambda *a: calls.append(1) or real(*a))
     for _ in range(3):
         manifest.check_object_file(folder / "mesh.obj")
     assert len(calls) == 1

@@ -8,10 +8,12 @@ The end-to-end cases (a single store as a target, the margin of the smoke run's 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -294,3 +296,161 @@ def test_a_killed_writer_leaves_no_temporary_folder_for_good(tmp_path):
     with atomic_path(tmp_path / "table.csv") as tmp:
         tmp.write_text("done")
     assert not stale_file.exists() and (tmp_path / "table.csv").read_text() == "done"
+
+
+# ---------------------------------------------------------------------------------------------------------
+# What still got past (the issue "What still gets past"): config files read strictly, whole numbers that are
+# floats, sizes beyond the machine's memory, a folder copied over another's, the kill window of a folder swap,
+# damaged cache entries.
+
+
+def test_a_repeated_config_key_is_refused_naming_the_file_and_both_lines(tmp_path):
+    from tohgs.config_files import ConfigFileError, read_config_file
+
+    path = tmp_path / "overlay.yaml"
+    path.write_text("evaluation:\n  qr: {max_sd: 0.05}\n  qr:\n    max_pv: 1.0e-5\n")
+    assert yaml.safe_load(path.read_text())["evaluation"]["qr"] == {"max_pv": 1.0e-5}  # what a plain load does
+    with pytest.raises(ConfigFileError, match=rf"{path}: line 3: key 'qr' repeats the key of line 2"):
+        read_config_file(path)
+    (tmp_path / "o.json").write_text('{"seed": 1, "seed": 2}')
+    with pytest.raises(ConfigFileError, match="key 'seed' repeats"):
+        read_config_file(tmp_path / "o.json")
+    (tmp_path / "merge.yaml").write_text("a: &a {x: 1, y: 2}\nb:\n  <<: *a\n  x: 3\n")  # a merge key overrides on purpose
+    assert read_config_file(tmp_path / "merge.yaml")["b"] == {"x": 3, "y": 2}
+    for shipped in [*(REPO / "config").glob("*.yaml"), REPO / ".test" / "config" / "config.yaml"]:
+        read_config_file(shipped)
+
+
+def test_the_workflow_reads_its_config_files_strictly(tmp_path):
+    overlay = tmp_path / "overlay.yaml"
+    overlay.write_text("seed: 3\nseed: 4\n")
+    run = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--quiet", "rules", "--configfile", str(overlay),
+                          "--cores", "1"], cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert run.returncode != 0
+    assert f"invalid configuration: {overlay}: line 2: key 'seed' repeats the key of line 1" in run.stdout + run.stderr
+
+
+def _laughs_of_mappings(levels: int, width: int = 9) -> str:
+    lines = ["a0: &a0 {k: 1}"]
+    lines += [f"a{i}: &a{i} {{" + ", ".join(f"k{j}: *a{i - 1}" for j in range(width)) + "}" for i in range(1, levels + 1)]
+    return "\n".join(lines) + "\n"
+
+
+def test_a_billion_laughs_of_mappings_is_refused_unexpanded(tmp_path):
+    from tohgs.config_files import ConfigFileError, main, read_config_file
+
+    path = tmp_path / "laughs.yaml"
+    path.write_text(_laughs_of_mappings(9))  # 9^9 mappings once expanded: Snakemake's merge hangs on it
+    t0 = time.perf_counter()
+    with pytest.raises(ConfigFileError, match=rf"{path}: line \d+: the block here stands for more than 200000 values"):
+        read_config_file(path)
+    assert time.perf_counter() - t0 < 5.0
+    (tmp_path / "loop.yaml").write_text("a: &a\n  - *a\n")
+    with pytest.raises(ConfigFileError, match="recursive"):
+        read_config_file(tmp_path / "loop.yaml")
+    assert main([str(path)]) == 1  # python -m tohgs.config_files, which make reproduce CONFIG=... runs first
+    assert main([str(REPO / "config" / "extras.yaml")]) == 0
+
+
+@pytest.mark.parametrize(("patch", "key"), [
+    ({"maps": {"shards": {"train": 1.0}}}, "maps.shards.train"),
+    ({"prediction": {"samples": 2.0}}, "prediction.samples"),
+    ({"seeds": [0, 1.0]}, "seeds.1"),
+    ({"methods": {"ours": {"settings": {"samples": 4.0}}}}, "methods.ours.settings.samples"),
+    ({"components": {"grasp_diffuser": {"training": {"steps": 100.0}}}}, "components.grasp_diffuser.training.steps"),
+])
+def test_a_whole_number_written_as_a_float_is_a_config_error_naming_its_key(patch, key):
+    with pytest.raises(ConfigError, match=rf"config key '{re.escape(key)}': expected integer, got float .* \(write it "
+                                          r"without a decimal point"):
+        validate_config(patch)
+
+
+def test_sizes_beyond_the_machine_memory_are_config_errors_that_say_what_fits():
+    from tohgs.config import _memory_bounds, batch_bytes_per_sample
+
+    with pytest.raises(ConfigError, match=r"config key 'prediction\.samples': 1000000000000 samples .* GiB .* more "
+                                          r"than this machine's .* at most \d+ fit"):
+        validate_config({"prediction": {"samples": 10**12}})
+    with pytest.raises(ConfigError, match=r"config key 'methods\.ours\.settings\.samples'"):
+        validate_config({"methods": {"ours": {"settings": {"samples": 10**12}}}})
+    with pytest.raises(ConfigError, match=r"config key 'training\.batch'"):
+        validate_config({"training": {"batch": 10**12}})
+    cfg = validate_config({})
+    per = batch_bytes_per_sample(cfg["maps"]["points"]["n_points"], cfg["maps"]["points"]["n_scene_points"])
+    memory = per * cfg["prediction"]["chunk"] * 100  # room for 100 samples per configuration
+    cfg["prediction"]["samples"] = 100
+    _memory_bounds(cfg, memory)
+    cfg["prediction"]["samples"] = 101
+    with pytest.raises(ConfigError, match=r"at most 100 fit"):
+        _memory_bounds(cfg, memory)
+
+
+def test_an_object_folder_copied_over_another_is_an_error_naming_both(tmp_path):
+    from tohgs.assets.manifest import check_object_file, record_object_files
+    from tohgs.assets.sources import read_object_meta
+
+    a = tmp_path / "objects" / "dir-a"
+    a.mkdir(parents=True)
+    (a / "mesh.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    record_object_files(a, {"name": "dir-a", "status": "ok"}, ["mesh.obj"])
+    check_object_file(a / "mesh.obj")
+    b = tmp_path / "objects" / "dir-b"
+    shutil.copytree(a, b)  # cp -a results/objects/dir-a results/objects/dir-b: every checksum matches
+    with pytest.raises(ValueError, match=r"meta\.json: records the object 'dir-a', but its folder is 'dir-b'"):
+        check_object_file(b / "mesh.obj")
+    with pytest.raises(ValueError, match="records the object 'dir-a'"):
+        read_object_meta(b)
+    assert read_object_meta(a)["name"] == "dir-a"
+
+
+def test_a_writer_killed_between_the_renames_of_a_folder_swap_loses_nothing(tmp_path):
+    from tohgs.io import remove_stale_temporaries
+
+    target = tmp_path / "import"
+    with atomic_dir(target) as tmp:
+        (tmp / "data.txt").write_text("first import")
+    code = ("import os, sys, tohgs.io\n"
+            "def killed(*a):\n    os._exit(9)\n"  # kill -9 at the instant the new folder would be renamed into place
+            "tohgs.io.os.replace = killed\n"
+            f"with tohgs.io.atomic_dir({str(target)!r}) as tmp:\n    (tmp / 'data.txt').write_text('second import')\n")
+    assert subprocess.run([sys.executable, "-c", code], cwd=REPO).returncode == 9
+    copies = [p for p in tmp_path.iterdir() if (p / "data.txt").is_file()]
+    assert any((p / "data.txt").read_text() == "first import" for p in copies)  # a complete copy kept aside
+    remove_stale_temporaries(target)  # what the next writer of the folder does first
+    assert (target / "data.txt").read_text() == "first import"
+    with atomic_dir(target) as tmp:
+        (tmp / "data.txt").write_text("third import")
+    assert (target / "data.txt").read_text() == "third import"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["import"]
+
+
+def test_a_damaged_cache_entry_is_recomputed_not_trusted(tmp_path, caplog):
+    from tohgs.cache import load_or_compute
+
+    calls = []
+
+    def compute() -> np.ndarray:
+        calls.append(1)
+        return np.arange(1000, dtype=np.float64)
+
+    def get() -> tuple[np.ndarray, bool]:
+        return load_or_compute(tmp_path, "voxels", "k" * 64, ".npy", compute,
+                               lambda v, p: np.save(open(p, "wb"), v), lambda p: np.load(p, allow_pickle=False))
+
+    value, hit = get()
+    assert not hit and len(calls) == 1
+    value, hit = get()
+    assert hit and len(calls) == 1
+    entry = tmp_path / "voxels" / f"{'k' * 64}.npy"
+    data = bytearray(entry.read_bytes())
+    data[-3] ^= 0x10  # a bit flip in the values: the file still loads
+    entry.write_bytes(bytes(data))
+    assert not np.array_equal(np.load(entry), np.arange(1000))
+    with caplog.at_level("WARNING"):
+        value, hit = get()
+    assert not hit and len(calls) == 2 and np.array_equal(value, np.arange(1000))
+    assert "do not match the SHA-256" in caplog.text
+    (tmp_path / "voxels" / f"{'k' * 64}.npy.sha256").unlink()  # an entry without a checksum: not trusted either
+    value, hit = get()
+    assert not hit and len(calls) == 3
+    assert get()[1]

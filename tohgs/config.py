@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 import re
 from collections.abc import Iterator, Mapping
 from pathlib import Path
@@ -102,6 +103,19 @@ def _fill_defaults(instance: Any, schema: Mapping[str, Any]) -> None:
                 _fill_defaults(value, entries)
 
 
+def _is_integer(checker: Any, instance: Any) -> bool:
+    """The schema's ``integer``: a Python ``int`` (not ``bool``), never a float. JSON schema counts ``1.0`` as an
+    integer, but YAML reads it as a float and the code that takes the value (``range``, array shapes, names
+    such as ``ours-seed1.0``) fails or misnames."""
+    return isinstance(instance, int) and not isinstance(instance, bool)
+
+
+#: The validator of every config check: JSON schema 2020-12 with :func:`_is_integer` as ``integer``.
+Validator = jsonschema.validators.extend(
+    jsonschema.Draft202012Validator,
+    type_checker=jsonschema.Draft202012Validator.TYPE_CHECKER.redefine("integer", _is_integer))
+
+
 def _error_message(err: jsonschema.ValidationError) -> str:
     where = _key_path(err.absolute_path)
     if err.validator == "additionalProperties":
@@ -110,8 +124,13 @@ def _error_message(err: jsonschema.ValidationError) -> str:
         where_unknown = ".".join(filter(None, [where if where != "<root>" else "", extra[0]]))
         return f"config key '{where_unknown}': unknown key (allowed here: {', '.join(allowed)})"
     if err.validator == "type":
+        hint = ""
+        if isinstance(err.instance, float) and "integer" in (
+                err.validator_value if isinstance(err.validator_value, list) else [err.validator_value]):
+            hint = (f" (write it without a decimal point: {int(err.instance)})" if err.instance.is_integer()
+                    else " (a whole number)")
         return (f"config key '{where}': expected {err.validator_value}, "
-                f"got {type(err.instance).__name__} {err.instance!r}")
+                f"got {type(err.instance).__name__} {err.instance!r}{hint}")
     if err.validator in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
         why = (" = 2^63 - 1, the largest seed: torch's and numpy's generators, the stores' JSON and the tables' "
                "int64 columns all take it") if err.validator == "maximum" and err.validator_value == SEED_MAX else ""
@@ -235,7 +254,7 @@ def _semantic_checks(cfg: Mapping[str, Any], base_dir: Path) -> None:
 
 def _validate_part(value: Any, schema: Mapping[str, Any], where: str) -> None:
     """Validate one part of the config against a sub-schema, the error naming ``where`` (dotted)."""
-    errors = sorted(jsonschema.Draft202012Validator(schema).iter_errors(value),
+    errors = sorted(Validator(schema).iter_errors(value),
                     key=lambda e: (len(e.absolute_path), list(map(str, e.absolute_path))))
     if errors:
         msg = _error_message(errors[0])
@@ -413,7 +432,7 @@ def validate_config(cfg: dict[str, Any], schema: Mapping[str, Any] | None = None
         raise ConfigError(f"config: expected a mapping at the top level, got {type(cfg).__name__}")
     _check_size(cfg)
     _fill_defaults(cfg, schema)
-    validator = jsonschema.Draft202012Validator(schema)
+    validator = Validator(schema)
     errors = sorted(validator.iter_errors(cfg), key=lambda e: (len(e.absolute_path), list(map(str, e.absolute_path))))
     if errors:
         raise ConfigError(_error_message(errors[0]))
@@ -422,7 +441,65 @@ def validate_config(cfg: dict[str, Any], schema: Mapping[str, Any] | None = None
     _semantic_checks(cfg, base)
     _components_methods_tables(cfg, schema)
     _replica_seeds(cfg)
+    _memory_bounds(cfg)
     return cfg
+
+
+def machine_memory_bytes() -> int:
+    """The physical memory of this machine, bytes (0 where the system does not say)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return 0
+
+
+def batch_bytes_per_sample(n_points: int, n_scene_points: int) -> int:
+    """The bytes one sample of a network batch (:class:`tohgs.data.batch.Batch`, float32) holds at the least:
+    the object's points and normals (3 + 3 per point), its two distance maps and a contact map (1 + 1 + 1), the
+    scene's points and normals (3 + 3 per scene point), the goal transform (16) and a grasp (51). The
+    networks' activations come on top, so this bounds from below what a batch of that size needs."""
+    return 4 * (9 * n_points + 6 * n_scene_points + 16 + 51)
+
+
+def _memory_bounds(cfg: Mapping[str, Any], memory: int | None = None) -> None:
+    """Refuse a size that multiplies memory beyond what this machine holds (the predict job dies in the
+    allocator without naming the key): the samples a predict job collates at once (``samples`` x ``chunk``
+    configurations, of the ``prediction`` block and each method's ``settings``) and the training batch (of
+    ``training`` and each component's), at :func:`batch_bytes_per_sample` bytes each, must fit in
+    ``memory`` (default: :func:`machine_memory_bytes`; 0 checks nothing).
+
+    Raises:
+        ConfigError: naming the key, the bytes its value needs at the least and the largest value that fits.
+    """
+    memory = machine_memory_bytes() if memory is None else memory
+    if memory <= 0:
+        return
+    pts = cfg["maps"]["points"]
+    per = batch_bytes_per_sample(pts["n_points"], pts["n_scene_points"])
+    gib = memory / 2**30
+
+    def refuse(key: str, value: int, times: int, what: str) -> None:
+        if value * times * per > memory:
+            raise ConfigError(
+                f"config key '{key}': {value} {what} need at least {value * times * per / 2**30:.3g} GiB "
+                f"({per} bytes per sample at maps.points.n_points = {pts['n_points']}, n_scene_points = "
+                f"{pts['n_scene_points']}{f', x {times}' if times > 1 else ''}), more than this machine's "
+                f"{gib:.3g} GiB; at most {max(memory // (times * per), 0)} fit (inputs alone, before the "
+                "networks' activations)")
+
+    pred, train = cfg["prediction"], cfg["training"]
+    refuse("prediction.samples", int(pred["samples"]), int(pred["chunk"]),
+           f"samples per configuration x {int(pred['chunk'])} configurations per chunk (prediction.chunk)")
+    for m, meth in cfg["methods"].items():
+        s = {**pred, **meth["settings"]}
+        key = f"methods.{m}.settings.{'samples' if 'samples' in meth['settings'] else 'chunk'}"
+        if "samples" in meth["settings"] or "chunk" in meth["settings"]:
+            refuse(key, int(s["samples"]), int(s["chunk"]),
+                   f"samples per configuration x {int(s['chunk'])} configurations per chunk")
+    refuse("training.batch", int(train["batch"]), 1, "samples per training batch")
+    for c, comp in cfg["components"].items():
+        if "batch" in comp["training"]:
+            refuse(f"components.{c}.training.batch", int(comp["training"]["batch"]), 1, "samples per training batch")
 
 
 def replica_name(name: str, seeds: list[int], seed: int) -> str:
@@ -475,9 +552,11 @@ def add_seed_replicas(cfg: dict[str, Any], methods: list[str] | None = None) -> 
 
 
 def load_config(path: Path | str, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """Load a YAML config file, apply nested ``overrides``, validate and return it (for library users)."""
-    with open(path) as fh:
-        cfg = yaml.safe_load(fh) or {}
+    """Load a YAML config file (strictly: :func:`tohgs.config_files.read_config_file`), apply nested
+    ``overrides``, validate and return it (for library users)."""
+    from tohgs.config_files import read_config_file
+
+    cfg = read_config_file(path)
     if overrides:
         merge(cfg, overrides)
     return validate_config(cfg)

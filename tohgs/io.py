@@ -24,6 +24,28 @@ _UMASK = os.umask(0)
 os.umask(_UMASK)
 
 
+_DIGESTS: dict[tuple[str, int, int, int, int], str] = {}
+
+
+def stat_key(path: str | Path) -> tuple[str, int, int, int, int]:
+    """What identifies one version of a file: its real path, device, inode, size and modification time."""
+    st = os.stat(path)
+    return (os.path.realpath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+
+
+def file_sha256(path: str | Path) -> str:
+    """The SHA-256 (hex) of a file's bytes, read in 1 MiB blocks, computed once per process per version of the
+    file (:func:`stat_key`: a file changed in place is hashed again)."""
+    key = stat_key(path)
+    if key not in _DIGESTS:
+        h = hashlib.sha256()
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+        _DIGESTS[key] = h.hexdigest()
+    return _DIGESTS[key]
+
+
 def _tmp_prefix(path: Path) -> str:
     """The name prefix of ``path``'s temporary siblings: ``.<name>.<host>-<pid>.``, so that a later writer
     can tell the leftovers of a killed process (same host, process gone) from a live one's."""
@@ -44,19 +66,34 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def _stale(tmp: Path, path: Path, host: str) -> bool:
+    """Whether ``tmp`` (a sibling named by :func:`_tmp_prefix`) was left by a killed process on this host."""
+    rest = tmp.name[len(path.name) + 2:]  # "<host>-<pid>.<random>.tmp"
+    owner = rest.split(".", 1)[0]
+    h, _, pid = owner.rpartition("-")
+    return h == host and pid.isdigit() and not _alive(int(pid))
+
+
 def remove_stale_temporaries(path: str | Path) -> list[Path]:
     """Remove the temporary siblings of ``path`` that a killed writer on this host left behind (its process
-    no longer exists); a live writer's, or another host's, are kept. Returns the removed paths."""
+    no longer exists); a live writer's, or another host's, are kept. A folder a killed :func:`atomic_dir`
+    had set aside (``*.old``) is put back in place if ``path`` is missing (killed between its two renames),
+    removed otherwise. Returns the removed or restored paths."""
     path = Path(path)
     host = _host()
     removed = []
     if not path.parent.is_dir():
         return removed
+    asides = [p for p in path.parent.glob(f".{glob.escape(path.name)}.*.old") if _stale(p, path, host)]
+    for old in sorted(asides, key=lambda p: p.stat().st_mtime_ns, reverse=True):
+        if not path.exists():
+            os.rename(old, path)
+            logging.getLogger(__name__).warning("%s: restored from %s, which a killed writer had set aside", path, old)
+        else:
+            shutil.rmtree(old, ignore_errors=True)
+        removed.append(old)
     for tmp in path.parent.glob(f".{glob.escape(path.name)}.*.tmp"):
-        rest = tmp.name[len(path.name) + 2:]  # "<host>-<pid>.<random>.tmp"
-        owner = rest.split(".", 1)[0]
-        h, _, pid = owner.rpartition("-")
-        if h != host or not pid.isdigit() or _alive(int(pid)):
+        if not _stale(tmp, path, host):
             continue
         if tmp.is_dir():
             shutil.rmtree(tmp, ignore_errors=True)
@@ -69,7 +106,12 @@ def remove_stale_temporaries(path: str | Path) -> list[Path]:
 @contextlib.contextmanager
 def atomic_dir(path: str | Path) -> Iterator[Path]:
     """Yield a fresh temporary folder next to ``path``; on success it replaces ``path``, on error it is removed.
-    Leftover temporary folders of killed writers of ``path`` are removed first."""
+    Leftover temporary folders of killed writers of ``path`` are removed first.
+
+    The swap keeps a complete copy at every instant: the old folder is renamed aside (``.<name>.<host>-<pid>.
+    <random>.old``), the new one renamed into place, then the old one removed. A process killed between the two
+    renames leaves the old folder aside, and the next writer of ``path`` puts it back
+    (:func:`remove_stale_temporaries`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(path)
@@ -77,12 +119,24 @@ def atomic_dir(path: str | Path) -> Iterator[Path]:
     os.chmod(tmp, 0o777 & ~_UMASK)
     try:
         yield tmp
-        if path.exists():
-            shutil.rmtree(path)
-        os.replace(tmp, path)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    old = None
+    try:
+        if path.exists():
+            old = path.parent / f"{_tmp_prefix(path)}{os.urandom(4).hex()}.old"
+            os.rename(path, old)
+        os.replace(tmp, path)
+    except BaseException:
+        if old is not None and not path.exists():
+            os.rename(old, path)
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if old is not None:  # a removal cut short leaves a partial folder aside: renamed so that it is never restored
+        dead = old.with_suffix(".tmp")
+        os.rename(old, dead)
+        shutil.rmtree(dead, ignore_errors=True)
 
 
 @contextlib.contextmanager

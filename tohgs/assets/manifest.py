@@ -14,38 +14,18 @@ so a file changed in place is hashed again), and ``meta.json`` is parsed once pe
 
 from __future__ import annotations
 
-import hashlib
 import json
-import os
 from pathlib import Path
 from typing import Any
+
+from tohgs.io import file_sha256, stat_key
 
 #: The key of ``meta.json`` that holds the folder's file records.
 FILES_KEY = "files"
 #: The folder's record, written by the stage that writes the folder.
 META_JSON = "meta.json"
 
-_DIGESTS: dict[tuple[str, int, int, int, int], str] = {}
 _METAS: dict[tuple[str, int, int, int, int], dict[str, Any]] = {}
-
-
-def _stat_key(path: Path) -> tuple[str, int, int, int, int]:
-    """What identifies one version of a file: its real path, device, inode, size and modification time."""
-    st = path.stat()
-    return (os.path.realpath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
-
-
-def file_sha256(path: str | Path) -> str:
-    """The SHA-256 (hex) of a file's bytes, computed once per process per version of the file."""
-    path = Path(path)
-    key = _stat_key(path)
-    if key not in _DIGESTS:
-        h = hashlib.sha256()
-        with open(path, "rb") as fh:
-            for block in iter(lambda: fh.read(1 << 20), b""):
-                h.update(block)
-        _DIGESTS[key] = h.hexdigest()
-    return _DIGESTS[key]
 
 
 def _count_faces(path: Path) -> int:
@@ -78,9 +58,18 @@ def record_object_files(folder: str | Path, meta: dict[str, Any], names: list[st
     return meta
 
 
+def read_meta(meta_path: str | Path) -> dict[str, Any]:
+    """A folder's ``meta.json``, parsed once per version, its recorded name checked against the folder's
+    (:func:`check_meta_name`); ``ValueError`` naming the file otherwise."""
+    meta_path = Path(meta_path)
+    meta = _read_meta(meta_path)
+    check_meta_name(meta, meta_path.parent)
+    return meta
+
+
 def _read_meta(meta_path: Path) -> dict[str, Any]:
     """A folder's ``meta.json``, parsed once per version (``ValueError`` naming an unreadable one)."""
-    key = _stat_key(meta_path)
+    key = stat_key(meta_path)
     if key not in _METAS:
         try:
             meta = json.loads(meta_path.read_text())
@@ -93,6 +82,22 @@ def _read_meta(meta_path: Path) -> dict[str, Any]:
     return _METAS[key]
 
 
+def check_meta_name(meta: dict[str, Any], folder: str | Path) -> None:
+    """The object a folder's ``meta.json`` records is the folder's own: a folder copied over another's
+    (``cp -a results/objects/a results/objects/b``) carries files whose checksums all match, and only the
+    recorded name tells it is the wrong object.
+
+    Raises:
+        ValueError: the recorded ``name`` is not the folder's name; the message names both.
+    """
+    folder = Path(folder)
+    name = meta.get("name")
+    if name is not None and name != folder.name:
+        raise ValueError(f"{folder / META_JSON}: records the object '{name}', but its folder is '{folder.name}' "
+                         f"(a folder copied or renamed over another's); rerun the objects stage for "
+                         f"'{folder.name}' (delete the folder)")
+
+
 def _records(folder: Path, subject: str) -> dict[str, dict[str, Any]]:
     """The file records of an objects ``folder``'s ``meta.json``; ``ValueError`` starting with ``subject``
     where it has none (no ``meta.json``: not a folder of the objects stage, or an unfinished one; no records:
@@ -102,7 +107,9 @@ def _records(folder: Path, subject: str) -> dict[str, dict[str, Any]]:
     if not meta_path.is_file():
         raise ValueError(f"{subject}no {META_JSON} in its folder, so nothing to check it against (not a folder of "
                          f"the objects stage, or an unfinished one); {rerun}")
-    records = _read_meta(meta_path).get(FILES_KEY)
+    meta = _read_meta(meta_path)
+    check_meta_name(meta, folder)
+    records = meta.get(FILES_KEY)
     if not isinstance(records, dict):
         raise ValueError(f"{subject}{meta_path} records no checksums of the folder's files (a folder of an older "
                          f"tohgs); {rerun}")

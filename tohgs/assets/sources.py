@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import difflib
 import importlib.util
-import json
 import os
 import re
 import stat
@@ -370,8 +369,13 @@ def read_object_meta(object_dir: str | Path) -> dict[str, Any]:
 
     Raises:
         FileNotFoundError: the folder has none (its objects job did not finish).
+        ValueError: it cannot be read, or records another object's name (a folder copied over this one's).
     """
+    import copy
+
+    from tohgs.assets.manifest import read_meta
+
     meta_path = Path(object_dir) / "meta.json"
     if not meta_path.is_file():
         raise FileNotFoundError(f"{meta_path}: missing; the objects stage did not finish for this object")
-    return json.loads(meta_path.read_text())
+    return copy.deepcopy(read_meta(meta_path))

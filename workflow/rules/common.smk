@@ -13,6 +13,7 @@ if str(REPO) not in sys.path:  # parse time only; jobs import the installed pack
     sys.path.insert(0, str(REPO))
 
 from tohgs.code_inputs import code_inputs
+from tohgs.config_files import ConfigFileError, check_config_files
 from tohgs.config import ConfigError, add_seed_replicas, drop_ground_truth_rows, job_settings, load_schema, validate_config
 from tohgs.assets.objects import check_split_sizes, read_catalog
 from tohgs.assets.sources import select_objects, task_set
@@ -30,8 +31,11 @@ coalesce_scheduler_timers()
 
 _SCHEMA = load_schema()
 try:
+    # Each config file read again strictly (repeated keys, aliases of aliases: tohgs/config_files.py), then
+    # the merged config Snakemake built from them validated.
+    check_config_files(workflow.configfiles)
     validate_config(config, _SCHEMA)
-except ConfigError as err:
+except (ConfigFileError, ConfigError) as err:
     raise WorkflowError(f"invalid configuration: {err}") from None
 
 # The task sets the configured tasks draw their targets from (bricks for stacking, objects otherwise).
