@@ -1,8 +1,12 @@
-# Two commands on a fresh machine (see README.md):
+# Two commands on a fresh machine (see README.md; `make` alone prints the targets):
 #   make reproduce   set up .venv, then run the workflow on the embedded default config
 #   make test        set up .venv with test tools, then pytest (with the end-to-end smoke run), lint, dry run
 # While developing: make test-fast   the unit tests only (pytest -m "not slow": no workflow runs)
 PYTHON ?= python3
+# the Pythons tohgs supports (pyproject.toml's requires-python)
+SUPPORTED := 3.11 3.12 3.13
+# where a pybullet wheel built from source is kept (no PyPI wheel for Python 3.12+): outside the venv, reused
+WHEEL_CACHE ?= $(HOME)/.cache/tohgs/wheels
 VENV ?= .venv
 CORES ?= 2
 TARGET ?= all
@@ -14,15 +18,40 @@ SNAKEMAKE := $(PY) -m snakemake$(if $(strip $(CONFIG)), --configfile $(CONFIG))
 CHECK_CONFIG := $(if $(strip $(CONFIG)),$(PY) -m tohgs.config_files $(CONFIG),@true)
 STAMP := $(VENV)/.tohgs-setup
 
-.PHONY: reproduce test test-fast setup browser lint dryrun benchmark report clean
+# the index torch 2.13.0 comes from: empty, pip's own (PyPI: on most machines the CUDA build, several GB);
+# https://download.pytorch.org/whl/cpu for the CPU build (about 200 MB) on a machine without a GPU
+TORCH_INDEX ?=
+# system packages that only the tests need (chromium for the viewer's browser tests; SLURM, MariaDB and munge
+# for the real SLURM run), installed by make test as root: yes where CI is set, otherwise no (those tests skip)
+SYSTEM_PACKAGES ?= $(if $(CI),yes,no)
+
+.PHONY: help reproduce test test-fast setup browser lint dryrun benchmark report clean
+
+help:
+	@echo "tohgs: task-oriented human grasp synthesis as a Snakemake workflow (README.md)"
+	@echo ""
+	@echo "  make reproduce    set up .venv, then run the whole workflow on the embedded default"
+	@echo "                    (config/config.yaml): about 245 job-minutes, 2-2.5 h on 2 cores"
+	@echo "  make test         set up .venv with the test tools, then pytest with the end-to-end smoke run,"
+	@echo "                    snakemake --lint and a dry run: about 20-30 min on 2 cores"
+	@echo "  make test-fast    the unit tests only (no workflow runs): about 3 min"
+	@echo "  make setup        only the environment (.venv)"
+	@echo "  make report       the HTML report of a finished run (results/report.html)"
+	@echo "  make benchmark    the stage benchmarks (benchmarks/results/*.json)"
+	@echo "  make clean        remove results/, logs/ and .snakemake/"
+	@echo ""
+	@echo "Variables: TARGET=<file or rule> (default all), CONFIG=\"FILE...\" (config files over the default,"
+	@echo "checked first), CORES=$(CORES), PYTHON=$(PYTHON), TORCH_INDEX=<pip index of torch>,"
+	@echo "SYSTEM_PACKAGES=yes|no (make test as root: install chromium and SLURM for their tests; now $(SYSTEM_PACKAGES))"
 
 reproduce: $(STAMP)
 	$(CHECK_CONFIG)
 	$(SNAKEMAKE) --cores $(CORES) $(TARGET)
 
 test: $(STAMP) browser
-	$(PY) -m pytest -p no:dash
+	$(if $(filter yes,$(SYSTEM_PACKAGES)),,TOHGS_SLURM_TEST=0 )$(PY) -m pytest -p no:dash
 	$(SNAKEMAKE) --lint
+	$(VENV)/bin/snakefmt --check workflow
 	$(SNAKEMAKE) --dry-run --quiet rules --cores $(CORES) $(TARGET)
 
 # the unit tests without the slow ones (the end-to-end workflow runs, marked slow: pyproject.toml)
@@ -41,23 +70,41 @@ $(STAMP): pyproject.toml
 	    echo "open3d needs libusb-1.0-0; run: sudo apt-get install -y libusb-1.0-0" >&2; exit 1; \
 	  fi; \
 	fi
-	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	@if ! test -x $(PY); then \
+	  v=$$($(PYTHON) -c 'import sys; print("%d.%d" % sys.version_info[:2])' 2>/dev/null) || { \
+	    echo "no Python at PYTHON=$(PYTHON): tohgs needs Python $(SUPPORTED); pick one with make PYTHON=python3.12" >&2; exit 1; }; \
+	  case " $(SUPPORTED) " in *" $$v "*) ;; *) \
+	    echo "tohgs needs Python $(SUPPORTED), and $(PYTHON) is $$v: pick one with make PYTHON=python3.12 (Debian 13" \
+	         "ships 3.13, Ubuntu 24.04 3.12; elsewhere: uv python install 3.12, or pyenv)" >&2; exit 1;; esac; \
+	  $(PYTHON) -m venv $(VENV); \
+	fi
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q torch==2.13.0
-	$(PY) -m pip install -q -e ".[test,viewer]"
+	@echo "torch 2.13.0 from $(if $(strip $(TORCH_INDEX)),$(TORCH_INDEX),pip's index (on most machines the CUDA build, several GB;" \
+	      "make TORCH_INDEX=https://download.pytorch.org/whl/cpu takes the CPU build))")
+	$(PY) -m pip install -q $(if $(strip $(TORCH_INDEX)),--index-url $(TORCH_INDEX) )torch==2.13.0
+	scripts/pybullet_wheel.sh $(PY) $(WHEEL_CACHE)
+	$(PY) -m pip install -q --find-links $(WHEEL_CACHE) -e ".[test,viewer]"
 	@$(PY) -c "import tohgs, torch, open3d, pybullet, coacd, snakemake, viser; print('tohgs environment ready: torch', torch.__version__)"
 	@touch $@
 
-# The viewer's tests (tests/test_viewer.py) load it in headless Chromium: Debian's package, installed as root;
-# otherwise those tests skip, saying so.
+# The viewer's tests (tests/test_viewer.py) load it in headless Chromium: Debian's package, installed as root
+# with SYSTEM_PACKAGES=yes (said before it starts); otherwise those tests skip, saying so. The same variable
+# lets tests/test_workflow.py install and start a one-node SLURM cluster (scripts/local_slurm.sh).
 browser:
-	@if ! command -v chromium >/dev/null 2>&1; then \
-	  if [ "$$(id -u)" = "0" ]; then \
-	    echo "installing chromium (the viewer's tests)"; \
-	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; \
-	  else \
-	    echo "the viewer's browser tests need chromium (they skip without it): sudo apt-get install -y chromium" >&2; \
-	  fi; \
+	@if command -v chromium >/dev/null 2>&1; then :; \
+	elif [ "$(SYSTEM_PACKAGES)" != "yes" ]; then \
+	  echo "no chromium: the viewer's browser tests skip (make test SYSTEM_PACKAGES=yes installs it as root)"; \
+	elif [ "$$(id -u)" = "0" ]; then \
+	  echo "SYSTEM_PACKAGES=yes: installing chromium (apt-get) for the viewer's browser tests"; \
+	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; \
+	else \
+	  echo "the viewer's browser tests need chromium (they skip without it): sudo apt-get install -y chromium" >&2; \
+	fi
+	@if [ "$(SYSTEM_PACKAGES)" = "yes" ]; then \
+	  echo "SYSTEM_PACKAGES=yes: the SLURM test installs (as root, apt-get) and starts slurm-wlm, MariaDB and munge" \
+	       "(scripts/local_slurm.sh) and stops them after"; \
+	else \
+	  echo "SYSTEM_PACKAGES=no: the real SLURM run skips (make test SYSTEM_PACKAGES=yes installs and starts SLURM for it)"; \
 	fi
 
 # the HTML report of a finished run: tables and figures with their captions (workflow/report/)

@@ -682,7 +682,7 @@ SLURM_TARGETS = ("results/metrics/placing/dataset.parquet", "results/models/plac
 
 def _slurm_skip_reason() -> str | None:
     if os.environ.get("TOHGS_SLURM_TEST", "1") == "0":
-        return "TOHGS_SLURM_TEST=0"
+        return "TOHGS_SLURM_TEST=0 (make test sets it unless SYSTEM_PACKAGES=yes: SLURM is a system service)"
     if os.geteuid() != 0:
         return "starts a SLURM cluster: needs root"
     if shutil.which("apt-get") is None and shutil.which("slurmctld") is None:

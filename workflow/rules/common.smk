@@ -9,12 +9,21 @@ from pathlib import Path
 from types import SimpleNamespace
 
 REPO = Path(workflow.basedir).parent
-if str(REPO) not in sys.path:  # parse time only; jobs import the installed package (pip install -e .)
+if (
+    str(REPO) not in sys.path
+):  # parse time only; jobs import the installed package (pip install -e .)
     sys.path.insert(0, str(REPO))
 
 from tohgs.code_inputs import code_inputs
 from tohgs.config_files import ConfigFileError, check_config_files
-from tohgs.config import ConfigError, add_seed_replicas, drop_ground_truth_rows, job_settings, load_schema, validate_config
+from tohgs.config import (
+    ConfigError,
+    add_seed_replicas,
+    drop_ground_truth_rows,
+    job_settings,
+    load_schema,
+    validate_config,
+)
 from tohgs.assets.objects import check_split_sizes, read_catalog
 from tohgs.assets.sources import select_objects, task_set
 from tohgs.grasps.filter import SCREEN_KEYS
@@ -45,28 +54,50 @@ TASK_SETS = sorted({task_set(t) for t in config["scenes"]["tasks"]})
 OFFICIAL = config["official"]["import_dir"]
 IMPORTED = None
 # The rules that generate data (rules/objects.smk, scenes.smk, grasps.smk); with an import they are not defined.
-GENERATION_RULES = ("prepare_object", "scenes", "prior_synthesis", "prior_filter", "prior_summary", "prior_figure",
-                    "task_grasps")
+GENERATION_RULES = (
+    "prepare_object",
+    "scenes",
+    "prior_synthesis",
+    "prior_filter",
+    "prior_summary",
+    "prior_figure",
+    "task_grasps",
+)
 
 SKIPPED_FILES = []  # (file, reason) of user-folder files that cannot be used
 if OFFICIAL:
     try:
         IMPORTED = read_import(OFFICIAL)
     except (ValueError, FileNotFoundError) as err:
-        raise WorkflowError(f"invalid configuration: config key 'official.import_dir': {err}") from None
+        raise WorkflowError(
+            f"invalid configuration: config key 'official.import_dir': {err}"
+        ) from None
     _missing = [t for t in config["scenes"]["tasks"] if t not in IMPORTED.splits]
     if _missing:
-        raise WorkflowError(f"invalid configuration: config key 'scenes.tasks': {', '.join(_missing)} not in the "
-                            f"import {OFFICIAL} (it has {', '.join(sorted(IMPORTED.splits))})")
+        raise WorkflowError(
+            f"invalid configuration: config key 'scenes.tasks': {', '.join(_missing)} not in the "
+            f"import {OFFICIAL} (it has {', '.join(sorted(IMPORTED.splits))})"
+        )
     if IMPORTED.hand != config["hand"]["model"]:
-        raise WorkflowError(f"invalid configuration: config key 'hand.model' is {config['hand']['model']!r} but the "
-                            f"import {OFFICIAL} carried its grasps with the {IMPORTED.hand!r} hand: import again "
-                            f"with --hand {config['hand']['model']} or set hand.model: {IMPORTED.hand}")
+        raise WorkflowError(
+            f"invalid configuration: config key 'hand.model' is {config['hand']['model']!r} but the "
+            f"import {OFFICIAL} carried its grasps with the {IMPORTED.hand!r} hand: import again "
+            f"with --hand {config['hand']['model']} or set hand.model: {IMPORTED.hand}"
+        )
     OBJECTS = dict.fromkeys(IMPORTED.objects)  # every object the import's catalog lists
 else:
     try:
-        OBJECTS = {spec.name: spec for spec in select_objects(config["objects"], config["seed"], skipped=SKIPPED_FILES)}
-        check_split_sizes(Counter(spec.task_set for spec in OBJECTS.values()), config["objects"]["split"], TASK_SETS)
+        OBJECTS = {
+            spec.name: spec
+            for spec in select_objects(
+                config["objects"], config["seed"], skipped=SKIPPED_FILES
+            )
+        }
+        check_split_sizes(
+            Counter(spec.task_set for spec in OBJECTS.values()),
+            config["objects"]["split"],
+            TASK_SETS,
+        )
     except (ValueError, FileNotFoundError, ModuleNotFoundError) as err:
         raise WorkflowError(f"invalid configuration: {err}") from None
 for _file, _reason in SKIPPED_FILES:
@@ -92,7 +123,9 @@ def objects_dir_of_catalog(wildcards, input):
     return os.path.dirname(input.catalog)
 
 
-_CODE = {}  # (script, modules) -> the code param: a workflow process reads each file once
+_CODE = (
+    {}
+)  # (script, modules) -> the code param: a workflow process reads each file once
 
 
 def code(script, *modules):
@@ -101,14 +134,20 @@ def code(script, *modules):
     (``"models/grasp_diffuser"``: a component or method kind) and theirs (:mod:`tohgs.code_inputs`), each
     with the SHA-256 (16 hex digits) of its content. An edit of any of them changes the param and makes the
     jobs stale; a touch does not. A param, not input files: the scheduler stats every input of every ready
-    job on each pass, and a job's thirty modules would make that its main cost. Nothing is listed by hand."""
+    job on each pass, and a job's thirty modules would make that its main cost. Nothing is listed by hand.
+    """
     key = (script, modules)
     if key not in _CODE:
         try:
             files = code_inputs(REPO / "workflow" / "scripts" / script, modules, REPO)
         except FileNotFoundError as err:
             raise WorkflowError(str(err)) from None
-        _CODE[key] = {f.relative_to(REPO).as_posix(): hashlib.sha256(f.read_bytes()).hexdigest()[:16] for f in files}
+        _CODE[key] = {
+            f.relative_to(REPO)
+            .as_posix(): hashlib.sha256(f.read_bytes())
+            .hexdigest()[:16]
+            for f in files
+        }
     return _CODE[key]
 
 
@@ -189,7 +228,9 @@ def task_targets(task):
 
 def scene_stores_of(task):
     """Every scene store of ``task``."""
-    return expand("results/scenes/{task}/{object}.zarr", task=task, object=task_targets(task))
+    return expand(
+        "results/scenes/{task}/{object}.zarr", task=task, object=task_targets(task)
+    )
 
 
 def scene_stores(wildcards):
@@ -198,7 +239,14 @@ def scene_stores(wildcards):
 
 def scene_settings(wildcards):
     """The scenes settings one task uses (so another task's settings do not make it stale)."""
-    keys = ("n_configs", "max_tries", "allow_fewer", "physics", "contact_margin", wildcards.task)
+    keys = (
+        "n_configs",
+        "max_tries",
+        "allow_fewer",
+        "physics",
+        "contact_margin",
+        wildcards.task,
+    )
     return _canonical({k: config["scenes"][k] for k in keys})
 
 
@@ -217,7 +265,9 @@ def prior_screen(wildcards):
 
 def plane_direction(wildcards):
     """Support planes of the synthesis for this object's source (prior_grasps.plane_direction)."""
-    return config["prior_grasps"]["plane_direction"]["bricks" if OBJECTS[wildcards.object].source == "bricks" else "objects"]
+    return config["prior_grasps"]["plane_direction"][
+        "bricks" if OBJECTS[wildcards.object].source == "bricks" else "objects"
+    ]
 
 
 SPLITS = ("train", "val", "test")
@@ -229,27 +279,41 @@ def split_objects(wildcards):
     if IMPORTED:
         return IMPORTED.splits[wildcards.task][wildcards.split]
     catalog = catalog_frame()
-    sel = catalog[(catalog.task_set == task_set(wildcards.task)) & (catalog.split == wildcards.split)]
+    sel = catalog[
+        (catalog.task_set == task_set(wildcards.task))
+        & (catalog.split == wildcards.split)
+    ]
     return sorted(sel.name)
 
 
 def split_scene_stores(wildcards):
     """The split's scene stores; with an import, the test split's are the official test configurations."""
     folder = "test_scenes" if IMPORTED and wildcards.split == "test" else "scenes"
-    return expand(f"results/{folder}/{{task}}/{{object}}.zarr", task=wildcards.task, object=split_objects(wildcards))
+    return expand(
+        f"results/{folder}/{{task}}/{{object}}.zarr",
+        task=wildcards.task,
+        object=split_objects(wildcards),
+    )
 
 
 def split_task_grasps(wildcards):
     """The split's task-grasp stores; none for an import's test split (its configurations have no grasps)."""
     if IMPORTED and wildcards.split == "test":
         return []
-    return expand("results/grasps/task/{task}/{object}.zarr", task=wildcards.task, object=split_objects(wildcards))
+    return expand(
+        "results/grasps/task/{task}/{object}.zarr",
+        task=wildcards.task,
+        object=split_objects(wildcards),
+    )
 
 
 def map_shards_of(task):
     """Every map shard of a task (all splits)."""
-    return [f"results/maps/{task}/{split}/shard-{k}.zarr" for split in SPLITS
-            for k in range(config["maps"]["shards"][split])]
+    return [
+        f"results/maps/{task}/{split}/shard-{k}.zarr"
+        for split in SPLITS
+        for k in range(config["maps"]["shards"][split])
+    ]
 
 
 def all_map_shards(wildcards):
@@ -261,22 +325,37 @@ def all_scene_stores(wildcards):
 
 
 def all_task_grasps(wildcards):
-    return [f"results/grasps/task/{task}/{o}.zarr" for task in config["scenes"]["tasks"] for o in task_targets(task)]
+    return [
+        f"results/grasps/task/{task}/{o}.zarr"
+        for task in config["scenes"]["tasks"]
+        for o in task_targets(task)
+    ]
 
 
-if IMPORTED:  # the official test configurations have no task grasps: no method that reads them can run
+if (
+    IMPORTED
+):  # the official test configurations have no task grasps: no method that reads them can run
     try:
-        _dropped = drop_ground_truth_rows(config, "the official test configurations have no ground-truth grasps")
+        _dropped = drop_ground_truth_rows(
+            config, "the official test configurations have no ground-truth grasps"
+        )
     except ConfigError as err:
         raise WorkflowError(f"invalid configuration: {err}") from None
     if _dropped:
-        print(f"official.import_dir: left out of the tables and figures (they read ground-truth grasps): "
-              f"{', '.join(_dropped)}", file=sys.stderr)
+        print(
+            f"official.import_dir: left out of the tables and figures (they read ground-truth grasps): "
+            f"{', '.join(_dropped)}",
+            file=sys.stderr,
+        )
 
 # The seed replicas (config key seeds): every table row's method, and what it builds on, once per seed
 # but the first, as components and methods of their own (tohgs.config.add_seed_replicas).
-REPLICAS = add_seed_replicas(config, [m for t in config["tables"].values() for m in t["rows"]])
-SEED_OF = {r: seed for reps in REPLICAS.values() for r, seed in zip(reps, config["seeds"])}
+REPLICAS = add_seed_replicas(
+    config, [m for t in config["tables"].values() for m in t["rows"]]
+)
+SEED_OF = {
+    r: seed for reps in REPLICAS.values() for r, seed in zip(reps, config["seeds"])
+}
 BASE_OF = {r: m for m, reps in REPLICAS.items() for r in reps}
 COMPONENTS = config["components"]
 METHODS = config["methods"]
@@ -293,13 +372,22 @@ def _names(names):
     return "|".join(re.escape(n) for n in sorted(names))
 
 
-COMPONENT_NAME, METHOD_NAME, TABLE_NAME = _names(COMPONENTS), _names(METHODS), _names(TABLES)
+COMPONENT_NAME, METHOD_NAME, TABLE_NAME = (
+    _names(COMPONENTS),
+    _names(METHODS),
+    _names(TABLES),
+)
 
 
 def used_methods():
     """The methods a table or the figures use, in first-use order: only these are predicted."""
-    contact_figure = [] if IMPORTED else config["figures"]["contact_methods"]  # no contact maps' figure of an import
-    names = [m for t in TABLES.values() for m in t["rows"]] + [*contact_figure, *config["figures"]["methods"]]
+    contact_figure = (
+        [] if IMPORTED else config["figures"]["contact_methods"]
+    )  # no contact maps' figure of an import
+    names = [m for t in TABLES.values() for m in t["rows"]] + [
+        *contact_figure,
+        *config["figures"]["methods"],
+    ]
     names += [m for ms in config["figures"]["comparisons"].values() for m in ms]
     out = []
     for m in names:  # with the methods they are of (kind filtered), first
@@ -319,15 +407,20 @@ def used_components():
 
 def component_settings(wildcards):
     """The training settings of one component: the training block overlaid with the component's own."""
-    return _canonical({**config["training"], **COMPONENTS[wildcards.component]["training"]})
+    return _canonical(
+        {**config["training"], **COMPONENTS[wildcards.component]["training"]}
+    )
 
 
 def method_settings(wildcards):
     """The prediction settings of one method's jobs, exactly those its kind reads (tohgs.config.job_settings:
-    so a sampler setting leaves the dataset row's draw be); ``steer`` only while it changes the sampling."""
+    so a sampler setting leaves the dataset row's draw be); ``steer`` only while it changes the sampling.
+    """
     settings = job_settings(config, wildcards.method, _SCHEMA)
     if not settings_from(GuidanceSettings, settings.get("steer")).changes_sampling:
-        settings.pop("steer", None)  # every lever off: the faithful sampler's settings, as before it existed
+        settings.pop(
+            "steer", None
+        )  # every lever off: the faithful sampler's settings, as before it existed
     return _canonical(settings)
 
 
@@ -335,12 +428,18 @@ def figure_methods(wildcards):
     """The methods of a predictions figure: ``figures.methods``, or comparison ``name``'s of
     ``figures.comparisons`` (rule comparison_figure)."""
     name = wildcards.get("name")
-    return config["figures"]["methods"] if name is None else config["figures"]["comparisons"][name]
+    return (
+        config["figures"]["methods"]
+        if name is None
+        else config["figures"]["comparisons"][name]
+    )
 
 
 def method_block(wildcards):
     """The method's config block as its predictions depend on it: without its label (the tables' concern)."""
-    return _canonical({k: v for k, v in METHODS[wildcards.method].items() if k != "label"})
+    return _canonical(
+        {k: v for k, v in METHODS[wildcards.method].items() if k != "label"}
+    )
 
 
 # Job priorities (Snakemake's ``priority:``): the data stages first, then the trainings, then the predictions;
@@ -366,7 +465,13 @@ def evaluation_sd_settings():
     """SD's settings in the evaluation: the physics of ``metrics.sd`` with the gravity of
     ``evaluation.sd_gravity`` (the prior grasps keep ``metrics.sd``'s own)."""
     g = config["evaluation"]["sd_gravity"]
-    return _canonical({**config["metrics"]["sd"], "gravity_direction": g["direction"], "gravity": g["vector"]})
+    return _canonical(
+        {
+            **config["metrics"]["sd"],
+            "gravity_direction": g["direction"],
+            "gravity": g["vector"],
+        }
+    )
 
 
 def robust_sd_settings(wildcards):
@@ -383,12 +488,19 @@ def palm_sd_of(wildcards):
     """Whether the method's evaluation simulates SD out of the palm: ``evaluation.palm_sd`` true, or a list
     that names the method (or the method a seed replica is of)."""
     palm = config["evaluation"]["palm_sd"]
-    return palm if isinstance(palm, bool) else BASE_OF.get(wildcards.method, wildcards.method) in palm
+    return (
+        palm
+        if isinstance(palm, bool)
+        else BASE_OF.get(wildcards.method, wildcards.method) in palm
+    )
 
 
 def method_models(wildcards):
     """The checkpoints of the method's components for the task."""
-    return [f"results/models/{wildcards.task}/{c}.pt" for c in components_of(wildcards.method)]
+    return [
+        f"results/models/{wildcards.task}/{c}.pt"
+        for c in components_of(wildcards.method)
+    ]
 
 
 def method_base(wildcards):
@@ -401,7 +513,9 @@ def method_code(wildcards):
     """The code a prediction job of the method runs: the script's, the method kind's, its components' kinds'
     (:func:`code`)."""
     kinds = [f"methods/{METHODS[wildcards.method]['kind']}"]
-    kinds += [f"models/{COMPONENTS[c]['kind']}" for c in components_of(wildcards.method)]
+    kinds += [
+        f"models/{COMPONENTS[c]['kind']}" for c in components_of(wildcards.method)
+    ]
     return code("predict.py", *kinds)
 
 
@@ -411,16 +525,26 @@ def checked_components():
 
 
 def train_shards(wildcards):
-    return [f"results/maps/{wildcards.task}/train/shard-{k}.zarr" for k in range(config["maps"]["shards"]["train"])]
+    return [
+        f"results/maps/{wildcards.task}/train/shard-{k}.zarr"
+        for k in range(config["maps"]["shards"]["train"])
+    ]
 
 
 def test_shards(wildcards):
-    return [f"results/maps/{wildcards.task}/test/shard-{k}.zarr" for k in range(config["maps"]["shards"]["test"])]
+    return [
+        f"results/maps/{wildcards.task}/test/shard-{k}.zarr"
+        for k in range(config["maps"]["shards"]["test"])
+    ]
 
 
 def prediction_outputs():
     """Every task's prediction store of every used method."""
-    return [f"results/predictions/{task}/{m}.zarr" for task in config["scenes"]["tasks"] for m in used_methods()]
+    return [
+        f"results/predictions/{task}/{m}.zarr"
+        for task in config["scenes"]["tasks"]
+        for m in used_methods()
+    ]
 
 
 def test_scene_stores(wildcards):
@@ -430,24 +554,38 @@ def test_scene_stores(wildcards):
 
 
 def all_test_shards(wildcards):
-    return [p for task in config["scenes"]["tasks"] for p in test_shards(SimpleNamespace(task=task))]
+    return [
+        p
+        for task in config["scenes"]["tasks"]
+        for p in test_shards(SimpleNamespace(task=task))
+    ]
 
 
 def table_metrics(wildcards):
     """Every task's metric file of every row of the table."""
-    return [f"results/metrics/{task}/{r}.parquet" for task in config["scenes"]["tasks"]
-            for m in TABLES[wildcards.table]["rows"] for r in REPLICAS[m]]
+    return [
+        f"results/metrics/{task}/{r}.parquet"
+        for task in config["scenes"]["tasks"]
+        for m in TABLES[wildcards.table]["rows"]
+        for r in REPLICAS[m]
+    ]
 
 
 def claims_methods():
     """The methods the claims compare: the rows of the tables they name."""
-    return sorted({m for c in config["claims"].values() for m in TABLES[c["table"]]["rows"]})
+    return sorted(
+        {m for c in config["claims"].values() for m in TABLES[c["table"]]["rows"]}
+    )
 
 
 def claims_metrics(wildcards):
     """Every task's metric file of every method the claims compare."""
-    return [f"results/metrics/{task}/{r}.parquet" for task in config["scenes"]["tasks"] for m in claims_methods()
-            for r in REPLICAS[m]]
+    return [
+        f"results/metrics/{task}/{r}.parquet"
+        for task in config["scenes"]["tasks"]
+        for m in claims_methods()
+        for r in REPLICAS[m]
+    ]
 
 
 def viewer_methods():
@@ -485,27 +623,51 @@ def claims_outputs():
 def final_outputs():
     """The default target's outputs known before the catalog exists (see catalog_outputs)."""
     tasks = config["scenes"]["tasks"]
-    return [
-        "results/objects/catalog.csv",
-        "results/objects/supports",
-        "results/figures/objects.png",
-        "results/figures/hand.png",
-        "results/maps/summary.csv",
-        "results/figures/maps.png",
-    ] + ([] if IMPORTED else [  # an import has no prior grasps, and no truth for the contact maps' figure
-        "results/grasps/prior/summary.csv",
-        "results/figures/prior_grasps.png",
-        "results/figures/contact_maps.png",
-    ]) + [f"results/tables/{t}.csv" for t in TABLES] + claims_outputs() + prediction_outputs() + [
-        f"results/models/{task}/checks.json" for task in tasks if checked_components()] + [
-        f"results/figures/{kind}_{task}.png" for task in tasks for kind in ("scenes", "predictions")] + [
-        f"results/figures/compare_{name}_{task}.png" for task in tasks for name in config["figures"]["comparisons"]
-    ] + viewer_outputs()
+    return (
+        [
+            "results/objects/catalog.csv",
+            "results/objects/supports",
+            "results/figures/objects.png",
+            "results/figures/hand.png",
+            "results/maps/summary.csv",
+            "results/figures/maps.png",
+        ]
+        + (
+            []
+            if IMPORTED
+            else [  # an import has no prior grasps, and no truth for the contact maps' figure
+                "results/grasps/prior/summary.csv",
+                "results/figures/prior_grasps.png",
+                "results/figures/contact_maps.png",
+            ]
+        )
+        + [f"results/tables/{t}.csv" for t in TABLES]
+        + claims_outputs()
+        + prediction_outputs()
+        + [
+            f"results/models/{task}/checks.json"
+            for task in tasks
+            if checked_components()
+        ]
+        + [
+            f"results/figures/{kind}_{task}.png"
+            for task in tasks
+            for kind in ("scenes", "predictions")
+        ]
+        + [
+            f"results/figures/compare_{name}_{task}.png"
+            for task in tasks
+            for name in config["figures"]["comparisons"]
+        ]
+        + viewer_outputs()
+    )
 
 
 def catalog_outputs(wildcards):
     """The default target's outputs per accepted object, known once the catalog checkpoint has run."""
-    return [store for task in config["scenes"]["tasks"] for store in scene_stores_of(task)]
+    return [
+        store for task in config["scenes"]["tasks"] for store in scene_stores_of(task)
+    ]
 
 
 def hand_source(wildcards):

@@ -11,6 +11,15 @@ rule maps:
         hand="results/hand/hand.npz",
     output:
         directory("results/maps/{task}/{split}/shard-{shard}.zarr"),
+    log:
+        "logs/maps/{task}/{split}/shard-{shard}.log",
+    benchmark:
+        "results/benchmarks/maps/{task}/{split}/shard-{shard}.tsv"
+    priority: PRIORITY["data"]
+    conda:
+        "../envs/tohgs.yaml"
+    resources:
+        **rule_resources("maps"),
     params:
         code=code("maps.py"),
         objects_dir=objects_dir_of_supports,
@@ -18,15 +27,6 @@ rule maps:
         n_shards=lambda w: config["maps"]["shards"][w.split],
         test_configs=setting("maps", "test_configs"),
         seed=setting("seed"),
-    resources:
-        **rule_resources("maps"),
-    priority: PRIORITY["data"]
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/maps/{task}/{split}/shard-{shard}.log",
-    benchmark:
-        "results/benchmarks/maps/{task}/{split}/shard-{shard}.tsv"
     script:
         "../scripts/maps.py"
 
@@ -40,14 +40,14 @@ rule dataset_summary:
         supports="results/objects/supports",
     output:
         "results/maps/summary.csv",
+    log:
+        "logs/maps/summary.log",
+    conda:
+        "../envs/tohgs.yaml"
     params:
         code=code("dataset_summary.py"),
         objects_dir=objects_dir_of_supports,
         seed=setting("seed"),
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/maps/summary.log",
     script:
         "../scripts/dataset_summary.py"
 
@@ -57,12 +57,16 @@ rule maps_figure:
         shards=all_map_shards,
         hand="results/hand/hand.npz",
     output:
-        report("results/figures/maps.png", caption="../report/maps.rst", category="Dataset"),
-    params:
-        code=code("maps_figure.py"),
-    conda:
-        "../envs/tohgs.yaml"
+        report(
+            "results/figures/maps.png",
+            caption="../report/maps.rst",
+            category="Dataset",
+        ),
     log:
         "logs/figures/maps.log",
+    conda:
+        "../envs/tohgs.yaml"
+    params:
+        code=code("maps_figure.py"),
     script:
         "../scripts/maps_figure.py"

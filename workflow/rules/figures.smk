@@ -6,15 +6,19 @@ rule objects_figure:
         catalog="results/objects/catalog.csv",
         objects=object_dirs(),
     output:
-        report("results/figures/objects.png", caption="../report/objects.rst", category="Objects"),
+        report(
+            "results/figures/objects.png",
+            caption="../report/objects.rst",
+            category="Objects",
+        ),
+    log:
+        "logs/figures/objects.log",
+    conda:
+        "../envs/tohgs.yaml"
     params:
         code=code("objects_figure.py"),
         max_objects=setting("figures", "max_objects"),
         seed=setting("seed"),
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/figures/objects.log",
     script:
         "../scripts/objects_figure.py"
 
@@ -24,14 +28,18 @@ rule scenes_figure:
         scenes=scene_stores,
         supports="results/objects/supports",
     output:
-        report("results/figures/scenes_{task}.png", caption="../report/scenes.rst", category="Scenes"),
+        report(
+            "results/figures/scenes_{task}.png",
+            caption="../report/scenes.rst",
+            category="Scenes",
+        ),
+    log:
+        "logs/figures/scenes_{task}.log",
+    conda:
+        "../envs/tohgs.yaml"
     params:
         code=code("scenes_figure.py"),
         objects_dir=objects_dir_of_supports,
         max_configs=setting("figures", "scene_configs"),
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/figures/scenes_{task}.log",
     script:
         "../scripts/scenes_figure.py"

@@ -10,6 +10,16 @@ rule prior_synthesis:
         hand="results/hand/hand.npz",
     output:
         directory("results/grasps/prior/raw/{object}.zarr"),
+    log:
+        "logs/grasps/prior_synthesis/{object}.log",
+    benchmark:
+        "results/benchmarks/grasps/prior_synthesis/{object}.tsv"
+    priority: PRIORITY["data"]
+    conda:
+        "../envs/tohgs.yaml"
+    threads: config["prior_grasps"]["threads"]
+    resources:
+        **rule_resources("prior_synthesis"),
     params:
         code=code("prior_synthesis.py"),
         synthesis=setting("prior_grasps", "synthesis"),
@@ -21,16 +31,6 @@ rule prior_synthesis:
         hand_model=setting("hand", "model"),
         seed=setting("seed"),
         cache_dir=setting("cache_dir"),
-    threads: config["prior_grasps"]["threads"]
-    resources:
-        **rule_resources("prior_synthesis"),
-    priority: PRIORITY["data"]
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/grasps/prior_synthesis/{object}.log",
-    benchmark:
-        "results/benchmarks/grasps/prior_synthesis/{object}.tsv"
     script:
         "../scripts/prior_synthesis.py"
 
@@ -40,16 +40,16 @@ rule prior_filter:
         raw="results/grasps/prior/raw/{object}.zarr",
     output:
         directory("results/grasps/prior/{object}.zarr"),
-    params:
-        code=code("prior_filter.py"),
-        thresholds=setting("prior_grasps", "filter"),
-    resources:
-        **rule_resources("prior_filter"),
+    log:
+        "logs/grasps/prior_filter/{object}.log",
     priority: PRIORITY["data"]
     conda:
         "../envs/tohgs.yaml"
-    log:
-        "logs/grasps/prior_filter/{object}.log",
+    resources:
+        **rule_resources("prior_filter"),
+    params:
+        code=code("prior_filter.py"),
+        thresholds=setting("prior_grasps", "filter"),
     script:
         "../scripts/prior_filter.py"
 
@@ -59,12 +59,12 @@ rule prior_summary:
         stores=prior_stores,
     output:
         "results/grasps/prior/summary.csv",
-    params:
-        code=code("prior_summary.py"),
-    conda:
-        "../envs/tohgs.yaml"
     log:
         "logs/grasps/prior_summary.log",
+    conda:
+        "../envs/tohgs.yaml"
+    params:
+        code=code("prior_summary.py"),
     script:
         "../scripts/prior_summary.py"
 
@@ -75,15 +75,19 @@ rule prior_figure:
         catalog="results/objects/catalog.csv",
         hand="results/hand/hand.npz",
     output:
-        report("results/figures/prior_grasps.png", caption="../report/prior_grasps.rst", category="Prior grasps"),
+        report(
+            "results/figures/prior_grasps.png",
+            caption="../report/prior_grasps.rst",
+            category="Prior grasps",
+        ),
+    log:
+        "logs/figures/prior_grasps.log",
+    conda:
+        "../envs/tohgs.yaml"
     params:
         code=code("prior_figure.py"),
         objects_dir=objects_dir_of_catalog,
         n_objects=setting("figures", "prior_objects"),
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/figures/prior_grasps.log",
     script:
         "../scripts/prior_figure.py"
 
@@ -97,16 +101,16 @@ rule task_grasps:
         hand="results/hand/hand.npz",
     output:
         directory("results/grasps/task/{task}/{object}.zarr"),
+    log:
+        "logs/grasps/task/{task}/{object}.log",
+    priority: PRIORITY["data"]
+    conda:
+        "../envs/tohgs.yaml"
+    resources:
+        **rule_resources("task_grasps"),
     params:
         code=code("task_grasps.py"),
         objects_dir=objects_dir_of_supports,
         settings=setting("task_grasps"),
-    resources:
-        **rule_resources("task_grasps"),
-    priority: PRIORITY["data"]
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/grasps/task/{task}/{object}.log",
     script:
         "../scripts/task_grasps.py"

@@ -6,16 +6,16 @@ rule hand_model:
         source=hand_source,
     output:
         "results/hand/hand.npz",
+    log:
+        "logs/hand/hand_model.log",
+    priority: PRIORITY["data"]
+    conda:
+        "../envs/tohgs.yaml"
     params:
         code=code("hand_model.py"),
         model=setting("hand", "model"),
         mano_path=setting("hand", "mano_path"),
         cache_dir=setting("cache_dir"),
-    priority: PRIORITY["data"]
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/hand/hand_model.log",
     script:
         "../scripts/hand_model.py"
 
@@ -24,12 +24,14 @@ rule hand_figure:
     input:
         hand="results/hand/hand.npz",
     output:
-        report("results/figures/hand.png", caption="../report/hand.rst", category="Hand"),
-    params:
-        code=code("hand_figure.py"),
-    conda:
-        "../envs/tohgs.yaml"
+        report(
+            "results/figures/hand.png", caption="../report/hand.rst", category="Hand"
+        ),
     log:
         "logs/figures/hand.log",
+    conda:
+        "../envs/tohgs.yaml"
+    params:
+        code=code("hand_figure.py"),
     script:
         "../scripts/hand_figure.py"

@@ -7,6 +7,15 @@ rule prepare_object:
         source=object_source,
     output:
         directory("results/objects/{object}"),
+    log:
+        "logs/objects/{object}.log",
+    benchmark:
+        "results/benchmarks/objects/{object}.tsv"
+    priority: PRIORITY["data"]
+    conda:
+        "../envs/tohgs.yaml"
+    resources:
+        **rule_resources("prepare_object"),
     params:
         code=code("prepare_object.py"),
         spec=object_spec,
@@ -15,15 +24,6 @@ rule prepare_object:
         decomposition=setting("objects", "decomposition"),
         limits=setting("objects", "limits"),
         cache_dir=setting("cache_dir"),
-    resources:
-        **rule_resources("prepare_object"),
-    priority: PRIORITY["data"]
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/objects/{object}.log",
-    benchmark:
-        "results/benchmarks/objects/{object}.tsv"
     script:
         "../scripts/prepare_object.py"
 
@@ -33,17 +33,17 @@ checkpoint catalog:
         objects=object_dirs(),
     output:
         "results/objects/catalog.csv",
+    log:
+        "logs/objects/catalog.log",
+    priority: PRIORITY["data"]
+    conda:
+        "../envs/tohgs.yaml"
     params:
         code=code("catalog.py"),
         split=setting("objects", "split"),
         seed=setting("seed"),
         task_sets=TASK_SETS,
         skipped=[list(s) for s in SKIPPED_FILES],  # user-folder files that are no objects, with the reason
-    priority: PRIORITY["data"]
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/objects/catalog.log",
     script:
         "../scripts/catalog.py"
 
@@ -51,14 +51,14 @@ checkpoint catalog:
 rule supports:
     output:
         directory("results/objects/supports"),
+    log:
+        "logs/objects/supports.log",
+    priority: PRIORITY["data"]
+    conda:
+        "../envs/tohgs.yaml"
     params:
         code=code("supports.py"),
         table=setting("objects", "supports", "table"),
         shelves=setting("objects", "supports", "shelves"),
-    priority: PRIORITY["data"]
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/objects/supports.log",
     script:
         "../scripts/supports.py"

@@ -9,14 +9,14 @@ rule official_object:
         imported("objects/{object}"),
     output:
         directory("results/objects/{object}"),
-    params:
-        code=code("official_copy.py"),
-    localrule: True
-    priority: PRIORITY["data"]
-    conda:
-        "../envs/tohgs.yaml"
     log:
         "logs/official/objects/{object}.log",
+    priority: PRIORITY["data"]
+    localrule: True
+    conda:
+        "../envs/tohgs.yaml"
+    params:
+        code=code("official_copy.py"),
     script:
         "../scripts/official_copy.py"
 
@@ -26,14 +26,14 @@ rule catalog:
         imported("objects/catalog.csv"),
     output:
         "results/objects/catalog.csv",
-    params:
-        code=code("official_copy.py"),
-    localrule: True
-    priority: PRIORITY["data"]
-    conda:
-        "../envs/tohgs.yaml"
     log:
         "logs/official/catalog.log",
+    priority: PRIORITY["data"]
+    localrule: True
+    conda:
+        "../envs/tohgs.yaml"
+    params:
+        code=code("official_copy.py"),
     script:
         "../scripts/official_copy.py"
 
@@ -43,14 +43,14 @@ rule supports:
         imported("objects/supports"),
     output:
         directory("results/objects/supports"),
-    params:
-        code=code("official_copy.py"),
-    localrule: True
-    priority: PRIORITY["data"]
-    conda:
-        "../envs/tohgs.yaml"
     log:
         "logs/official/supports.log",
+    priority: PRIORITY["data"]
+    localrule: True
+    conda:
+        "../envs/tohgs.yaml"
+    params:
+        code=code("official_copy.py"),
     script:
         "../scripts/official_copy.py"
 
@@ -60,14 +60,14 @@ rule official_scenes:
         imported("scenes/{task}/{object}.zarr"),
     output:
         directory("results/scenes/{task}/{object}.zarr"),
-    params:
-        code=code("official_copy.py"),
-    localrule: True
-    priority: PRIORITY["data"]
-    conda:
-        "../envs/tohgs.yaml"
     log:
         "logs/official/scenes/{task}/{object}.log",
+    priority: PRIORITY["data"]
+    localrule: True
+    conda:
+        "../envs/tohgs.yaml"
+    params:
+        code=code("official_copy.py"),
     script:
         "../scripts/official_copy.py"
 
@@ -77,14 +77,14 @@ rule official_task_grasps:
         imported("grasps/task/{task}/{object}.zarr"),
     output:
         directory("results/grasps/task/{task}/{object}.zarr"),
-    params:
-        code=code("official_copy.py"),
-    localrule: True
-    priority: PRIORITY["data"]
-    conda:
-        "../envs/tohgs.yaml"
     log:
         "logs/official/task_grasps/{task}/{object}.log",
+    priority: PRIORITY["data"]
+    localrule: True
+    conda:
+        "../envs/tohgs.yaml"
+    params:
+        code=code("official_copy.py"),
     script:
         "../scripts/official_copy.py"
 
@@ -94,13 +94,13 @@ rule official_test_scenes:
         imported("test_scenes/{task}/{object}.zarr"),
     output:
         directory("results/test_scenes/{task}/{object}.zarr"),
-    params:
-        code=code("official_copy.py"),
-    localrule: True
-    priority: PRIORITY["data"]
-    conda:
-        "../envs/tohgs.yaml"
     log:
         "logs/official/test_scenes/{task}/{object}.log",
+    priority: PRIORITY["data"]
+    localrule: True
+    conda:
+        "../envs/tohgs.yaml"
+    params:
+        code=code("official_copy.py"),
     script:
         "../scripts/official_copy.py"

@@ -8,19 +8,19 @@ rule scenes:
         supports="results/objects/supports",
     output:
         directory("results/scenes/{task}/{object}.zarr"),
+    log:
+        "logs/scenes/{task}/{object}.log",
+    benchmark:
+        "results/benchmarks/scenes/{task}/{object}.tsv"
+    priority: PRIORITY["data"]
+    conda:
+        "../envs/tohgs.yaml"
+    resources:
+        **rule_resources("scenes"),
     params:
         code=code("scenes.py"),
         objects_dir=objects_dir_of_supports,
         settings=scene_settings,
         seed=setting("seed"),
-    resources:
-        **rule_resources("scenes"),
-    priority: PRIORITY["data"]
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/scenes/{task}/{object}.log",
-    benchmark:
-        "results/benchmarks/scenes/{task}/{object}.tsv"
     script:
         "../scripts/scenes.py"

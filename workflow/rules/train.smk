@@ -7,22 +7,26 @@ rule train:
         hand="results/hand/hand.npz",
     output:
         model="results/models/{task}/{component}.pt",
-        curve=report("results/models/{task}/{component}.png", caption="../report/training.rst", category="Training"),
+        curve=report(
+            "results/models/{task}/{component}.png",
+            caption="../report/training.rst",
+            category="Training",
+        ),
+    log:
+        "logs/models/{task}/{component}.log",
+    benchmark:
+        "results/benchmarks/models/{task}/{component}.tsv"
+    priority: PRIORITY["train"]
+    conda:
+        "../envs/tohgs.yaml"
+    threads: config["training"]["threads"]
+    resources:
+        **rule_resources("train"),
     params:
         code=lambda w: code("train.py", f"models/{COMPONENTS[w.component]['kind']}"),
         kind=lambda w: COMPONENTS[w.component]["kind"],
         network=lambda w: _canonical(COMPONENTS[w.component]["network"]),
         settings=component_settings,
-    threads: config["training"]["threads"]
-    resources:
-        **rule_resources("train"),
-    priority: PRIORITY["train"]
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/models/{task}/{component}.log",
-    benchmark:
-        "results/benchmarks/models/{task}/{component}.tsv"
     script:
         "../scripts/train.py"
 
@@ -35,20 +39,20 @@ rule predict:
         base=method_base,
     output:
         directory("results/predictions/{task}/{method}.zarr"),
-    params:
-        code=method_code,
-        method=method_block,
-        settings=method_settings,
-    threads: config["prediction"]["threads"]
-    resources:
-        **rule_resources("predict"),
-    priority: PRIORITY["predict"]
-    conda:
-        "../envs/tohgs.yaml"
     log:
         "logs/predictions/{task}/{method}.log",
     benchmark:
         "results/benchmarks/predictions/{task}/{method}.tsv"
+    priority: PRIORITY["predict"]
+    conda:
+        "../envs/tohgs.yaml"
+    threads: config["prediction"]["threads"]
+    resources:
+        **rule_resources("predict"),
+    params:
+        code=method_code,
+        method=method_block,
+        settings=method_settings,
     script:
         "../scripts/predict.py"
 
@@ -56,16 +60,18 @@ rule predict:
 rule model_checks:
     input:
         shards=train_shards,
-        models=lambda w: [f"results/models/{w.task}/{c}.pt" for c in checked_components()],
+        models=lambda w: [
+            f"results/models/{w.task}/{c}.pt" for c in checked_components()
+        ],
         hand="results/hand/hand.npz",
     output:
         "results/models/{task}/checks.json",
+    log:
+        "logs/models/{task}/checks.log",
+    conda:
+        "../envs/tohgs.yaml"
     params:
         code=code("model_checks.py", *(f"models/{kind}" for kind in CHECKED_KINDS)),
         seed=setting("training", "seed"),
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/models/{task}/checks.log",
     script:
         "../scripts/model_checks.py"

@@ -12,7 +12,15 @@ rule viewer:
         supports="results/objects/supports",
         hand="results/hand/hand.npz",
     output:
-        report("results/viewer/{task}.html", caption="../report/viewer.rst", category="Viewer"),
+        report(
+            "results/viewer/{task}.html",
+            caption="../report/viewer.rst",
+            category="Viewer",
+        ),
+    log:
+        "logs/figures/viewer_{task}.log",
+    conda:
+        "../envs/tohgs.yaml"
     params:
         code=code("viewer_export.py"),
         objects_dir=objects_dir_of_supports,
@@ -20,9 +28,5 @@ rule viewer:
         qr=setting("evaluation", "qr"),
         configs=setting("figures", "viewer", "configs"),
         samples=setting("figures", "viewer", "samples"),
-    conda:
-        "../envs/tohgs.yaml"
-    log:
-        "logs/figures/viewer_{task}.log",
     script:
         "../scripts/viewer_export.py"
