@@ -21,6 +21,9 @@ STAMP := $(VENV)/.tohgs-setup
 # the index torch 2.13.0 comes from: empty, pip's own (PyPI: on most machines the CUDA build, several GB);
 # https://download.pytorch.org/whl/cpu for the CPU build (about 200 MB) on a machine without a GPU
 TORCH_INDEX ?=
+TORCH_SOURCE = $(if $(strip $(TORCH_INDEX)),$(TORCH_INDEX),pip's index (on most machines the CUDA build$(comma) several GB; \
+	make TORCH_INDEX=https://download.pytorch.org/whl/cpu takes the CPU build))
+comma := ,
 # system packages that only the tests need (chromium for the viewer's browser tests; SLURM, MariaDB and munge
 # for the real SLURM run), installed by make test as root: yes where CI is set, otherwise no (those tests skip)
 SYSTEM_PACKAGES ?= $(if $(CI),yes,no)
@@ -79,8 +82,7 @@ $(STAMP): pyproject.toml
 	  $(PYTHON) -m venv $(VENV); \
 	fi
 	$(PY) -m pip install -q --upgrade pip
-	@echo "torch 2.13.0 from $(if $(strip $(TORCH_INDEX)),$(TORCH_INDEX),pip's index (on most machines the CUDA build, several GB;" \
-	      "make TORCH_INDEX=https://download.pytorch.org/whl/cpu takes the CPU build))")
+	@echo "torch 2.13.0 from $(TORCH_SOURCE)"
 	$(PY) -m pip install -q $(if $(strip $(TORCH_INDEX)),--index-url $(TORCH_INDEX) )torch==2.13.0
 	scripts/pybullet_wheel.sh $(PY) $(WHEEL_CACHE)
 	$(PY) -m pip install -q --find-links $(WHEEL_CACHE) -e ".[test,viewer]"
