@@ -83,14 +83,14 @@ MIN_GRASP_CONTEXT_GAP = 0.08
 MIN_CONTACT_GAP = 0.2
 # ContactDiffuser's permuted-map gap (its loss on maps whose values are permuted across the points): 0.54,
 # 0.75 and 0.57 on the three tasks of a smoke run at 3f49b72 (0.015-0.082 with epsilon prediction and no
-# local mixing, at 8749e89), untrained copies -0.06 to 0.024 at 1024 draws (docs/results.md has the default
+# local mixing, at 8749e89), untrained copies -0.06 to 0.024 at 1024 draws (docs/history.md has the default
 # run's).
 MIN_PERMUTED_GAP = 0.2
 # SceneDiffuser (a GraspDiffuser reading the object alone) is not held to a gap here: at the smoke size it
 # barely reads its object (gap_context 0.0003-0.0015 on the three tasks at 400 steps of d_model 32), and an
 # object-only generator has much less to read than one given a contact map. That it learns its condition
 # is tests/test_scenediffuser.py's check (a trained model against an untrained copy, on data it can read);
-# the default run's gap is in docs/results.md.
+# the default run's gap is in docs/history.md.
 
 
 def test_the_smoke_models_read_their_condition_and_untrained_copies_do_not(smoke_run):

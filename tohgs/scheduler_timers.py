@@ -7,7 +7,7 @@ Snakemake 9). The wake-ups count on a semaphore, so each pass's timer starts the
 another timer: a chain that never ends while jobs wait for cores, and every job event (a job finished,
 a checkpoint) starts one more chain. After E events the scheduler runs about E passes per timespan, each
 re-evaluating the params and statting the inputs of every ready job. On the default run (570 jobs on 2
-cores) the Snakemake process used 42 % of a core 83 minutes in, taken from the jobs (docs/results.md).
+cores) the Snakemake process used 42 % of a core 83 minutes in, taken from the jobs (docs/history.md).
 The timers are also non-daemon threads, so the process waits for the last of them before it exits.
 
 :func:`coalesce_scheduler_timers` replaces that method with one that starts a timer only when none is

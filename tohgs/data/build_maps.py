@@ -92,7 +92,7 @@ class EmptySplitError(ValueError):
 
 def empty_split_message(task: str, split: str, attrs: dict[str, dict], grasps: dict[str, dict[str, np.ndarray]]) -> str:
     """Why a split holds no task grasp: per object the accepted prior grasps, the configurations and the
-    task grasps kept, and the settings that raise them (see the README, "When a split has no grasps")."""
+    task grasps kept, and the settings that raise them (see docs/conventions.md, "When a split has no grasps")."""
     rows = "; ".join(f"{o}: {attrs[o].get('n_prior_accepted', '?')} accepted prior grasps -> "
                      f"{len(grasps[o]['config'])} task grasps over {len(grasps[o]['kept_per_config'])} configurations"
                      for o in sorted(grasps))
@@ -100,7 +100,7 @@ def empty_split_message(task: str, split: str, attrs: dict[str, dict], grasps: d
             f"({rows}). Raise the yield: more prior grasps per object (prior_grasps.synthesis.batch, iterations), "
             "more configurations per object (scenes.n_configs), more objects in the split "
             "(objects.sources, objects.split), or a looser collision tolerance (task_grasps.tolerance); see the "
-            "README, \"When a split has no grasps\"")
+            "docs/conventions.md, \"When a split has no grasps\"")
 
 
 def _object_cloud(objects_dir: Path, name: str, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:

@@ -15,7 +15,7 @@ The prediction settings ``tta`` (:class:`tohgs.grasps.tta.TTASettings`) are this
 its own streams first (the same grasps as one configuration at a time). Per configuration the mean energy
 before and after the adaptation is recorded, and the share of its hands that touch the object (a vertex
 within 5 mm of an object point, :data:`tohgs.grasps.tta.TOUCH`) before and after: the adaptation's
-penetration term can push a hand that enters the object from one side off it (docs/results.md, issue 39). Where the generator reads no
+penetration term can push a hand that enters the object from one side off it (docs/history.md, issue 39). Where the generator reads no
 map, the stored contact maps are ContactNet's for the adapted hands (what the adaptation aimed at).
 """
 

@@ -9,7 +9,7 @@ the clean map x0 with ``diffusion.prediction: sample`` (the laptop default's com
 With ``local_k`` > 0 every block also mixes each point's token with its ``local_k`` nearest object points'
 tokens (:class:`LocalMix`, the mean and the max of the neighbours' tokens less its own): a denoiser that sees
 its neighbours' noisy values can keep contact in regions, where global attention alone, at the laptop's
-width and depth, denoised nearly point by point (docs/results.md, issue 39). The official model gets its
+width and depth, denoised nearly point by point (docs/history.md, issue 39). The official model gets its
 local context from PointNet++ in every block; ``local_k: 0`` (config/paper.yaml) is that architecture.
 
 With ``frame: canonical`` (beyond the official model) the points and normals enter in a frame computed
