@@ -246,7 +246,7 @@ def test_the_viewer_shows_the_scene_and_the_picture_follows_the_controls(results
 @pytest.mark.slow
 @needs_chromium
 def test_the_static_export_renders_offline_in_chromium(results, tmp_path):
-    from tohgs.viz.view import REPORT_BYTES, export_html
+    from tohgs.viz.view import REPORT_BYTES, YCB_CREDIT, export_html
 
     html = results / "viewer/placing.html"  # the workflow's (rule viewer, in the default target)
     if "TOHGS_SMOKE_RESULTS" not in os.environ:
@@ -258,6 +258,8 @@ def test_the_static_export_renders_offline_in_chromium(results, tmp_path):
     assert "__VISER_EMBED_DATA__" in text and 100_000 < len(text) < 30_000_000
     assert len(text) < REPORT_BYTES, "over what the report's frame shows"
     data = TaskResults.from_results(results, "placing")
+    if any(o.startswith("ycb-") for o in data.objects) and len(data.objects) <= 4:  # every object drawn
+        assert YCB_CREDIT in text, "a page with YCB models carries their credit (CC BY 4.0)"
     requests: list[str] = []
     with vb.browser() as ctx:
         page = vb.open_page(ctx, html.resolve().as_uri(), requests)

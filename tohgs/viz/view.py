@@ -48,6 +48,9 @@ LINE = 0.012  # m between the static export's metric lines
 #: The largest static export the report shows: it embeds the file as a base64 data: URL in a frame, and Chromium
 #: refuses URLs over 2 MiB (2,097,152 characters, 4/3 of the file).
 REPORT_BYTES = 1_500_000
+#: The credit a page that draws YCB object models carries (their licence, CC BY 4.0, asks for it).
+YCB_CREDIT = ("Object models: the YCB Object and Model Set (Calli et al., IEEE RAM 2015; ycbbenchmarks.com), "
+              "CC BY 4.0; rescaled, cleaned and convex-decomposed by tohgs")
 EXPORT_FACES = 1500  # most triangles of an object mesh in a static export (:func:`decimated`; docs/viewer.md)
 
 
@@ -244,6 +247,8 @@ class Viewer:
     def _build_gui(self) -> None:
         gui = self.server.gui
         gui.add_markdown(f"**tohgs** results: `{self.results_dir}`")
+        if any(o.startswith("ycb-") for o in self.data.objects):
+            gui.add_markdown(YCB_CREDIT)
         self.task = gui.add_dropdown("Task", self.tasks, initial_value=self.data.task,
                                      hint="The task whose test configurations are shown")
         self.object = gui.add_dropdown("Object", self.data.objects, hint="The test object (the target)")
@@ -496,6 +501,10 @@ def export_html(data: TaskResults, out: str | Path, configs: int = 4, samples: i
         html = scene.as_html()
     finally:
         server.stop()
+    if any(o.startswith("ycb-") for o, _ in picks):
+        credit = (f'<div style="position:fixed;left:6px;bottom:4px;z-index:1000;font:11px sans-serif;color:#444;'
+                  f'background:rgba(255,255,255,0.7)">{YCB_CREDIT}</div>')
+        html = html.replace("</body>", credit + "</body>", 1) if "</body>" in html else html + credit
     with atomic_path(out) as tmp:
         Path(tmp).write_text(html)
     info = {"task": data.task, "configurations": [f"{o} #{c}" for o, c in picks], "methods": names, "hands": hands,
