@@ -102,60 +102,65 @@ class MeshLimits:
     max_file_mb: float = 100.0
 
 
-def count_faces(path: str | Path) -> int:
-    """The triangles of a mesh file, counted without parsing it into arrays (a pass over its lines, or the
-    header of a binary STL or a PLY): ``.obj`` ``f`` lines (k corners: k - 2 triangles), binary STL's count,
-    ASCII STL's ``facet`` lines, PLY's ``element face`` count. Memory does not grow with the file."""
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix == ".obj":
-        n = 0
-        with open(path, "rb") as fh:
-            for line in fh:
-                if line[:2] in (b"f ", b"f\t"):
-                    n += max(len(line.split()) - 3, 0)
-        return n
-    if suffix == ".stl":
-        with open(path, "rb") as fh:
-            head = fh.read(84)
-        if len(head) == 84:
-            n = int.from_bytes(head[80:84], "little")
-            if 84 + 50 * n == path.stat().st_size:  # a binary STL
-                return n
-        n = 0
-        with open(path, "rb") as fh:
-            for line in fh:
-                n += line.lstrip().startswith(b"facet")
-        return n
-    if suffix == ".ply":
-        with open(path, "rb") as fh:
-            for _ in range(10_000):  # header lines
-                words = fh.readline().split()
-                if not words or words[0] == b"end_header":
-                    break
-                if words[:2] == [b"element", b"face"] and len(words) == 3 and words[2].isdigit():
-                    return int(words[2])
-        return 0
-    raise MeshError(f"{path}: unsupported suffix '{path.suffix}' (expected one of {MESH_SUFFIXES})")
+def count_faces(path: str | Path, stop_above: int | None = None) -> int:
+    """The triangles that trimesh takes from a mesh file (``trimesh.load(path, force="mesh", process=False)``, as
+    :func:`load_mesh` reads it; a polygon of k corners is the k - 2 triangles it is triangulated into), counted
+    without parsing the file into arrays: the file is read a block at a time, so memory does not grow with it.
+    The count is never below what trimesh takes (above it only for a malformed file, or one whose reading
+    differs between trimesh and the format's specification: the larger reading counts):
+
+    - ``.obj``: the text as trimesh reads it (UTF-8, or the encoding it guesses for a file that is not;
+      ``\\r\\n`` read as ``\\n``; a backslash at a line's end joins the next line to it), every line whose first
+      non-blank character is ``f`` (``f``, ``f\\t``, ``f1``; trimesh takes the ones without leading blanks) with
+      k corners: k - 2 triangles; face lines with the same number of values (``1/2/3`` is 3) count as many
+      triangles each as the one with the most corners, as trimesh reads such lines as one table with the first
+      line's corners. A face line that holds ``usemtl`` (where trimesh would split it) is refused.
+    - ``.stl``: a binary STL (its size is 84 + 50 n bytes): the header's n; an ASCII STL: one triangle per 9
+      numbers after the ``vertex`` keywords (any case; trimesh reads the numbers after each keyword up to the
+      line's end, and makes triangles of them, ``facet`` or not).
+    - ``.ply``: the header, read strictly (one that trimesh could read otherwise is refused), and the body up
+      to and through the ``face`` element: the sum over its records of max(k - 2, 0), k the length of the
+      record's ``vertex_indices`` (or ``vertex_index``) list; the elements before are skipped (a binary
+      element of fixed-size records by a seek). An ASCII body is read as trimesh reads it, one record a line;
+      for a binary body the count is the larger of that sum and trimesh's reading, which takes every record
+      of an element to be as long as its first.
+
+    Args:
+        path: the file.
+        stop_above: stop reading once the count exceeds this (at most a block later; the count returned is
+            then above ``stop_above``, possibly below the file's whole count); None: count the whole file.
+
+    Raises:
+        MeshError: an unsupported suffix, an unreadable file, or one whose triangles cannot be counted
+            reliably (a malformed PLY header or record, a truncated binary PLY body, ...); the message names the
+            file and the reason.
+    """
+    from tohgs.assets.face_count import count_triangles
+
+    return count_triangles(Path(path), stop_above)[0]
 
 
 def check_mesh_limits(path: str | Path, limits: MeshLimits) -> int:
-    """Refuse a mesh file beyond ``limits`` before it is parsed; returns its face count.
+    """Refuse a mesh file beyond ``limits`` before it is parsed; returns its face count (:func:`count_faces`,
+    which stops reading once the count exceeds ``max_faces``).
 
     Raises:
-        MeshError: the file is larger than ``max_file_mb`` or has more than ``max_faces`` triangles (the
-            reason names the file, the size and the setting).
+        MeshError: the file is larger than ``max_file_mb``, has more than ``max_faces`` triangles, or its
+            triangles cannot be counted (the reason names the file, the size and the setting).
     """
     path = Path(path)
     size_mb = path.stat().st_size / 1e6
     if size_mb > limits.max_file_mb:
         raise MeshError(f"{path}: a file of {size_mb:.1f} MB, larger than objects.limits.max_file_mb = "
                         f"{limits.max_file_mb:g} MB (not parsed; decimate the mesh or raise the limit)")
-    n = count_faces(path)
+    from tohgs.assets.face_count import count_triangles
+
+    n, whole = count_triangles(path, limits.max_faces)
     if n > limits.max_faces:
-        raise MeshError(f"{path}: {n} faces, more than objects.limits.max_faces = {limits.max_faces} (not "
-                        "parsed: repairing and decomposing it would need more memory than the rule asks for; "
-                        "decimate the mesh, or raise the limit with resources.rules.prepare_object.mem_mb)")
+        raise MeshError(f"{path}: {n if whole else f'at least {n}'} faces, more than objects.limits.max_faces = "
+                        f"{limits.max_faces} (not parsed: repairing and decomposing it would need more memory than "
+                        "the rule asks for; decimate the mesh, or raise the limit with "
+                        "resources.rules.prepare_object.mem_mb)")
     return n
 
 
@@ -185,7 +190,8 @@ def load_mesh(path: str | Path, limits: MeshLimits | None = None) -> trimesh.Tri
             None: no limit.
 
     Raises:
-        MeshError: the file is missing, beyond ``limits``, cannot be parsed, or holds no triangles.
+        MeshError: the file is missing, beyond ``limits`` (or, with limits, its triangles cannot be counted:
+            :func:`count_faces`), cannot be parsed, or holds no triangles.
     """
     path = Path(path)
     if not path.is_file():

@@ -24,10 +24,10 @@ the grasps of one scene side by side.
 **Unreadable files** (a bad pickle, a refused pickle global, missing keys, unequal list lengths, bad
 shapes, a position beyond :data:`~tohgs.official.format.POSITION_BOUND` of the origin, a missing listed
 file, a mesh that fails validation or exceeds the mesh limits, an official name that becomes the same tohgs
-name as another's) are counted and reported with their reasons (:class:`ImportReport`,
-``import_report.json``), never skipped silently and never a crash; files are read safely
-(:mod:`tohgs.official.format`'s Reading). An import is written into a temporary folder and renamed into
-place when complete.
+name as another's, a grasp file listed in both ``train.txt`` and ``val.txt``) are counted and reported with
+their reasons (:class:`ImportReport`, ``import_report.json``), never skipped silently and never a crash; files
+are read safely (:mod:`tohgs.official.format`'s Reading). An import is written into a temporary folder and
+renamed into place when complete.
 """
 
 from __future__ import annotations
@@ -81,9 +81,13 @@ class _Reader:
         return data
 
     def hash(self, rel: str) -> Path:
-        """Record the digest of a file another reader (trimesh) will parse; returns its path."""
-        self.read(rel)
-        return self.root / rel
+        """Record the digest of a file another reader (trimesh) will parse; returns its path. The file is hashed
+        a block at a time, never held whole: the reader's own limits (:func:`~tohgs.assets.mesh.load_mesh`'s
+        file size) are what refuse a file too large."""
+        path = self.root / rel
+        with open(path, "rb") as fh:
+            self.digests[rel] = hashlib.file_digest(fh, "sha256").hexdigest()
+        return path
 
 
 
@@ -97,8 +101,9 @@ class ImportReport:
         files_read: files read (each has a line in ``checksums.sha256``).
         problems: per unreadable or missing file ``{"path", "kind", "reason"}``; ``kind`` is ``unreadable``
             (also absurd numbers: a position beyond :data:`POSITION_BOUND`, a wrong shape), ``missing``,
-            ``mesh`` (a mesh that failed validation) or ``name`` (an official name that becomes the same tohgs
-            name as another's; both files named).
+            ``mesh`` (a mesh that failed validation), ``name`` (an official name that becomes the same tohgs
+            name as another's; both files named) or ``split`` (a grasp file listed in both ``train.txt`` and
+            ``val.txt``, imported in neither split; the path is ``val.txt``, the reason names both lists).
         notes: what was read differently from the lists, or not at all (unlisted files), for the record.
         tasks: per task ``files``, ``rows`` (grasps), ``configurations``, ``test_files``,
             ``test_configurations``, ``targets``.
@@ -248,7 +253,8 @@ def _read_list(reader: _Reader, rel: str) -> list[str]:
 
 
 def _task_files(reader: _Reader, task: str, report: ImportReport) -> dict[str, str]:
-    """``{stem: official split}`` of a task's grasp files (``train.txt``/``val.txt``, or Stacking's list)."""
+    """``{stem: official split}`` of a task's grasp files (``train.txt``/``val.txt``, or Stacking's list); a
+    file listed in both ``train.txt`` and ``val.txt`` is in neither, a problem of kind ``split``."""
     base = f"{DATASET_DIR}/{task}"
     present = {p.stem for p in (reader.root / base).glob("*.npy")}
     lists: dict[str, list[str]] = {}
@@ -261,6 +267,7 @@ def _task_files(reader: _Reader, task: str, report: ImportReport) -> dict[str, s
                 report.problem(rel, "unreadable", f"{exc}: the task's {split} objects are not imported")
         elif task != "stacking":
             report.problem(rel, "missing", f"no {split} list: the task's {split} objects are not imported")
+    both: list[str] = []  # stems in train.txt and val.txt
     if task == "stacking":
         files = {b: split for split, bricks in STACKING_SPLIT.items() for b in bricks if b in present}
         absent = [b for bricks in STACKING_SPLIT.values() for b in bricks if b not in present]
@@ -272,7 +279,13 @@ def _task_files(reader: _Reader, task: str, report: ImportReport) -> dict[str, s
                                     "split (the official training code's) is used")
     else:
         files = {s: split for split, names in lists.items() for s in names}
-    unlisted = sorted(present - set(files))
+        both = sorted(set(lists.get("train", ())) & set(lists.get("val", ())))
+        for stem in both:  # trained on or validated, not both: neither split takes it
+            del files[stem]
+            report.problem(f"{base}/val.txt", "split",
+                           f"'{stem}.npy' is listed in both {base}/train.txt and {base}/val.txt: imported in "
+                           "neither split (neither its grasps nor its test configurations)")
+    unlisted = sorted(present - set(files) - set(both))
     if unlisted:
         report.notes.append(f"{task}: files in no split, not imported: {[f'{s}.npy' for s in unlisted]}")
     return files
