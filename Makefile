@@ -18,6 +18,10 @@ SNAKEMAKE := $(PY) -m snakemake$(if $(strip $(CONFIG)), --configfile $(CONFIG))
 CHECK_CONFIG := $(if $(strip $(CONFIG)),$(PY) -m tohgs.config_files $(CONFIG),@true)
 STAMP := $(VENV)/.tohgs-setup
 
+# a second interpreter for the unit tests that make test runs after its own (where CI is set: the newest 3.13 or
+# 3.12 of the image's pyenv, in .venv-second, pybullet from the wheel cache); empty: none, said so
+SECOND_PYTHON ?= $(if $(CI),$(lastword $(sort $(wildcard $(HOME)/.pyenv/versions/3.12.*/bin/python \
+	$(HOME)/.pyenv/versions/3.13.*/bin/python))))
 # the index torch 2.13.0 comes from: empty, pip's own (PyPI: on most machines the CUDA build, several GB);
 # https://download.pytorch.org/whl/cpu for the CPU build (about 200 MB) on a machine without a GPU
 TORCH_INDEX ?=
@@ -45,7 +49,8 @@ help:
 	@echo ""
 	@echo "Variables: TARGET=<file or rule> (default all), CONFIG=\"FILE...\" (config files over the default,"
 	@echo "checked first), CORES=$(CORES), PYTHON=$(PYTHON), TORCH_INDEX=<pip index of torch>,"
-	@echo "SYSTEM_PACKAGES=yes|no (make test as root: install chromium and SLURM for their tests; now $(SYSTEM_PACKAGES))"
+	@echo "SYSTEM_PACKAGES=yes|no (make test as root: install chromium and SLURM for their tests; now $(SYSTEM_PACKAGES)),"
+	@echo "SECOND_PYTHON=<interpreter> (make test runs the unit tests again with it; now $(or $(SECOND_PYTHON),none))"
 
 reproduce: $(STAMP)
 	$(CHECK_CONFIG)
@@ -56,6 +61,12 @@ test: $(STAMP) browser
 	$(SNAKEMAKE) --lint
 	$(VENV)/bin/snakefmt --check workflow
 	$(SNAKEMAKE) --dry-run --quiet rules --cores $(CORES) $(TARGET)
+	@if [ -n "$(strip $(SECOND_PYTHON))" ]; then \
+	  echo "the unit tests again with a second Python, $(SECOND_PYTHON) (SECOND_PYTHON; in .venv-second)"; \
+	  $(MAKE) --no-print-directory test-fast VENV=.venv-second PYTHON=$(SECOND_PYTHON); \
+	else \
+	  echo "SECOND_PYTHON is empty: the unit tests ran with one Python (make test SECOND_PYTHON=python3.13 adds one)"; \
+	fi
 
 # the unit tests without the slow ones (the end-to-end workflow runs, marked slow: pyproject.toml)
 test-fast: $(STAMP)

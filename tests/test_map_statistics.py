@@ -56,6 +56,7 @@ def test_the_maps_carry_a_difference_they_make_and_not_one_they_do_not():
     assert set(own["means"]) == {"first", "second"} and own["means"]["second"]["offset_cm"] > own["means"]["first"]["offset_cm"]
 
 
+@pytest.mark.slow  # the smoke run: the end-to-end tests' fixture
 def test_the_script_on_the_smoke_run(smoke_run, tmp_path):
     sys.path.insert(0, str(REPO / "scripts"))
     from map_statistics import main
