@@ -84,3 +84,23 @@ def test_the_command_line_writes_and_names_its_errors(run, tmp_path, capsys):
     assert len(list((tmp_path / "m").glob("*_goal.ply"))) == 6 and not list((tmp_path / "m").glob("*_init.ply"))
     assert main([str(store), "--format", "npz", "--out", str(tmp_path / "p"), "--hand", str(tmp_path / "none.npz")]) == 1
     assert "none.npz: no hand file" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_a_glb_with_its_scene_holds_the_hand_the_target_and_the_scene(smoke_run, tmp_path):
+    from tohgs.data.predictions import read_predictions
+    from tohgs.hand import HandAssets
+
+    store = smoke_run / "results" / "predictions" / "placing" / "ours.zarr"
+    files = export_meshes(store, tmp_path, "glb", ("goal",), with_scene=True)
+    scene = trimesh.load(files[0])
+    names = set(scene.geometry)
+    assert {"hand", "target"} <= names and any(n.startswith("support:") for n in names), names
+    transform, geometry = scene.graph["hand"]
+    hand = scene.geometry[geometry].copy().apply_transform(transform)
+    arrays, _ = read_predictions(store)
+    assets = HandAssets.load(smoke_run / "results" / "hand" / "hand.npz")
+    want = assets.vertices(arrays["grasp_goal"][0, :1].astype(np.float64))[0]
+    assert np.abs(hand.vertices - want).max() < 1e-6
+    with pytest.raises(ValueError, match="--with-scene needs --format glb"):
+        export_meshes(store, tmp_path, "obj", with_scene=True)

@@ -7,7 +7,10 @@ docs/formats.md) with the run's hand (``results/hand/hand.npz``, found beside th
 - a mesh format writes one file per grasp and pose, ``<object>_c<config>_s<sample>_<pose>.<ext>``: the hand
   posed by its 51-number grasp vector (:meth:`tohgs.hand.assets.HandAssets.vertices`), metres, world frame,
   the hand's faces (open at the wrist, as the model has them); kept and discarded grasps alike (the NPZ's
-  ``kept`` says which);
+  ``kept`` says which). ``--with-scene`` (GLB only) puts the configuration in the same file: the target at
+  that pose and the support, base brick and obstacles, each a named node (``hand``, ``target``,
+  ``support:<name>``, ...), read from the run's ``results/`` as the viewer reads it
+  (:class:`tohgs.viz.view_data.TaskResults`);
 - ``npz`` writes one ``<task>_<method>.npz`` of every grasp's parameters in MANO's layout, each of shape
   (C, S, ...): ``transl`` (3, m), ``global_orient`` (3, axis-angle about the rest wrist joint, rad),
   ``hand_pose`` (45: 15 joints x axis-angle in MANO's joint order, relative to the flat hand: smplx's MANO
@@ -96,9 +99,10 @@ def export_npz(store: str | Path, out: str | Path, hand: str | Path | None = Non
 
 
 def export_meshes(store: str | Path, out: str | Path, fmt: str, poses: tuple[str, ...] = POSES,
-                  hand: str | Path | None = None) -> list[Path]:
+                  hand: str | Path | None = None, with_scene: bool = False) -> list[Path]:
     """Write one hand mesh file per grasp and pose of the store (module docstring), each atomically; returns
-    the files in the store's order (configuration, sample, pose)."""
+    the files in the store's order (configuration, sample, pose). ``with_scene`` (GLB only): each file also
+    holds the configuration's target at that pose and its scene."""
     import trimesh
     from tqdm import tqdm
 
@@ -107,19 +111,33 @@ def export_meshes(store: str | Path, out: str | Path, fmt: str, poses: tuple[str
 
     if fmt not in ("obj", "ply", "glb"):
         raise ValueError(f"format {fmt!r}: one of obj, ply, glb")
+    if with_scene and fmt != "glb":
+        raise ValueError(f"--with-scene needs --format glb (one file of several meshes), not {fmt}")
     store = Path(store)
     arrays, attrs = read_predictions(store)
     assets = _hand_of(store, hand)
     objects = attrs["objects"]
+    scene_of = None
+    if with_scene:
+        from tohgs.viz.view_data import TaskResults
+
+        scene_of = TaskResults.from_results(store.resolve().parent.parent.parent, attrs["task"], hand=assets)
     files = []
     n_configs = len(arrays["object_id"])
     for c in tqdm(range(n_configs), desc=f"export {store.name}", disable=n_configs < 8):
         name = f"{objects[int(arrays['object_id'][c])]}_c{int(arrays['config_index'][c])}"
         for pose in poses:
             verts = assets.vertices(np.asarray(arrays[f"grasp_{pose}"][c], dtype=np.float64))
+            context = {}
+            if scene_of is not None:
+                obj, ci = objects[int(arrays["object_id"][c])], int(arrays["config_index"][c])
+                context = {"target": scene_of.target(obj, ci, pose)}
+                context |= {f"{p.kind}:{p.name}": p.world() for p in scene_of.parts(obj, ci)}
             for s, v in enumerate(verts):
                 path = Path(out) / f"{name}_s{s}_{pose}.{fmt}"
                 mesh = trimesh.Trimesh(v, assets.faces, process=False)
+                if context:
+                    mesh = trimesh.Scene({"hand": mesh, **context})
                 with atomic_path(path) as tmp:
                     data = mesh.export(file_type=fmt)
                     Path(tmp).write_bytes(data if isinstance(data, bytes) else data.encode())
@@ -134,6 +152,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--format", choices=FORMATS, required=True)
     parser.add_argument("--pose", choices=(*POSES, "both"), default="both", help="mesh formats: which pose")
     parser.add_argument("--out", default=None, help="output folder (default: export/<task>/<method>/ here)")
+    parser.add_argument("--with-scene", action="store_true", help="glb: the target at the pose and its scene in "
+                        "each file (reads the run's results/)")
     parser.add_argument("--hand", default=None, help="the run's hand file (default: results/hand/hand.npz beside "
                         "the store's results/)")
     args = parser.parse_args(argv)
@@ -145,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
             print(export_npz(store, out, args.hand))
         else:
             poses = POSES if args.pose == "both" else (args.pose,)
-            files = export_meshes(store, out, args.format, poses, args.hand)
+            files = export_meshes(store, out, args.format, poses, args.hand, args.with_scene)
             print(f"{len(files)} files in {out}")
     except (ValueError, FileNotFoundError) as exc:
         print(f"error: {exc}", file=sys.stderr)
