@@ -41,16 +41,10 @@ def main() -> None:
     import tohgs.cache as cache
     import tohgs.io as tio
     from base_commit import cpu_name
+    from evaluation_job import evaluate_as_job
     from tohgs.config import load_config
-    from tohgs.hand import HandAssets
-    from tohgs.metrics.evaluate import evaluate_predictions
 
     cfg = load_config(args.configfile)
-    results = Path(args.results)
-    g = cfg["evaluation"]["sd_gravity"]
-    sd = {**cfg["metrics"]["sd"], "gravity_direction": g["direction"], "gravity": g["vector"]}
-    store = results / "predictions" / args.task / f"{args.method}.zarr"
-    scenes = sorted((results / "scenes" / args.task).glob("*.zarr"))
     spent = {"verified": 0.0, "check_meta_name": 0.0}
     calls = {"verified": 0, "check_meta_name": 0}
 
@@ -73,10 +67,7 @@ def main() -> None:
         for k in spent:
             spent[k], calls[k] = 0.0, 0
         t0 = time.perf_counter()
-        rows = evaluate_predictions(store, scenes, results / "objects", results / "objects" / "supports" / "supports.json",
-                                    HandAssets.load(results / "hand" / "hand.npz"), sd, cfg["metrics"]["voxel_pitch"],
-                                    cfg["cache_dir"] if Path(cfg["cache_dir"]).is_absolute() else results.parent / cfg["cache_dir"],
-                                    sd_hand=cfg["evaluation"]["sd_hand"], pv_mesh=cfg["evaluation"]["pv_mesh"])
+        rows = evaluate_as_job(cfg, args.results, args.task, args.method)
         total = time.perf_counter() - t0
         run = {"job_s": round(total, 3), "grasps": len(rows), **{f"{k}_s": round(v, 5) for k, v in spent.items()},
                **{f"{k}_calls": n for k, n in calls.items()}, "share": sum(spent.values()) / total}

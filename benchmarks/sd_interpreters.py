@@ -23,28 +23,19 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benchmarks"))
 
 
 def run(args: argparse.Namespace) -> None:
     import numpy as np
     import pybullet
 
+    from evaluation_job import evaluate_as_job
     from tohgs.config import load_config
-    from tohgs.hand import HandAssets
     from tohgs.io import write_json
-    from tohgs.metrics.evaluate import evaluate_predictions
 
-    cfg = load_config(args.configfile)
     results = Path(args.results)
-    g = cfg["evaluation"]["sd_gravity"]
-    sd = {**cfg["metrics"]["sd"], "gravity_direction": g["direction"], "gravity": g["vector"]}
-    cache = Path(cfg["cache_dir"])
-    rows = evaluate_predictions(results / "predictions" / args.task / f"{args.method}.zarr",
-                                sorted((results / "scenes" / args.task).glob("*.zarr")), results / "objects",
-                                results / "objects" / "supports" / "supports.json",
-                                HandAssets.load(results / "hand" / "hand.npz"), sd, cfg["metrics"]["voxel_pitch"],
-                                cache if cache.is_absolute() else results.parent / cache,
-                                sd_hand=cfg["evaluation"]["sd_hand"], pv_mesh=cfg["evaluation"]["pv_mesh"])
+    rows = evaluate_as_job(load_config(args.configfile), results, args.task, args.method)
     sd_values = np.asarray(rows["sd"], dtype=np.float64)
     write_json(args.out, {"python": platform.python_version(), "pybullet_numpy": int(pybullet.isNumpyEnabled()),
                           "task": args.task, "method": args.method, "results": str(results),
