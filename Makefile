@@ -17,6 +17,7 @@ PY := $(VENV)/bin/python
 SNAKEMAKE := $(PY) -m snakemake$(if $(strip $(CONFIG)), --configfile $(CONFIG))
 CHECK_CONFIG := $(if $(strip $(CONFIG)),$(PY) -m tohgs.config_files $(CONFIG),@true)
 STAMP := $(VENV)/.tohgs-setup
+LINT_VENV ?= .venv-lint
 
 # a second interpreter for the unit tests that make test runs after its own (where CI is set: the newest 3.13 or
 # 3.12 of the image's pyenv, in .venv-second, pybullet from the wheel cache); empty: none, said so
@@ -32,7 +33,7 @@ comma := ,
 # for the real SLURM run), installed by make test as root: yes where CI is set, otherwise no (those tests skip)
 SYSTEM_PACKAGES ?= $(if $(CI),yes,no)
 
-.PHONY: help reproduce test test-fast setup browser lint dryrun benchmark report clean
+.PHONY: help reproduce test test-fast setup browser lint benchmark report clean
 
 help:
 	@echo "tohgs: task-oriented human grasp synthesis as a Snakemake workflow (README.md)"
@@ -42,6 +43,7 @@ help:
 	@echo "  make test         set up .venv with the test tools, then pytest with the end-to-end smoke run,"
 	@echo "                    snakemake --lint and a dry run: about 25-30 min on 2 cores"
 	@echo "  make test-fast    the unit tests only (no workflow runs): about 3 min"
+	@echo "  make lint         snakemake --lint in .venv and in a venv of Snakemake alone (.venv-lint), snakefmt"
 	@echo "  make setup        only the environment (.venv)"
 	@echo "  make report       the HTML report of a finished run (results/report.html)"
 	@echo "  make benchmark    the stage benchmarks (benchmarks/results/*.json)"
@@ -58,8 +60,7 @@ reproduce: $(STAMP)
 
 test: $(STAMP) browser
 	$(if $(filter yes,$(SYSTEM_PACKAGES)),,TOHGS_SLURM_TEST=0 )$(PY) -m pytest -p no:dash
-	$(SNAKEMAKE) --lint
-	$(VENV)/bin/snakefmt --check workflow
+	$(MAKE) --no-print-directory lint
 	$(SNAKEMAKE) --dry-run --quiet rules --cores $(CORES) $(TARGET)
 	@if [ -n "$(strip $(SECOND_PYTHON))" ]; then \
 	  echo "the unit tests again with a second Python, $(SECOND_PYTHON) (SECOND_PYTHON; in .venv-second)"; \
@@ -67,6 +68,18 @@ test: $(STAMP) browser
 	else \
 	  echo "SECOND_PYTHON is empty: the unit tests ran with one Python (make test SECOND_PYTHON=python3.13 adds one)"; \
 	fi
+
+# snakemake --lint twice: in .venv, and in .venv-lint, which has nothing but Snakemake (this .venv's version):
+# the workflow parses without the project's packages, as the Snakemake workflow catalogue checks it; then snakefmt
+lint: $(STAMP)
+	$(SNAKEMAKE) --lint
+	@v=$$($(PY) -c 'import importlib.metadata as m; print(m.version("snakemake"))'); \
+	if ! test -x $(LINT_VENV)/bin/snakemake || [ "$$($(LINT_VENV)/bin/snakemake --version)" != "$$v" ]; then \
+	  echo "$(LINT_VENV): a venv with only snakemake $$v, for the lint a bare Snakemake environment gives"; \
+	  rm -rf $(LINT_VENV) && $(PY) -m venv $(LINT_VENV) && $(LINT_VENV)/bin/python -m pip install -q "snakemake==$$v"; \
+	fi
+	$(LINT_VENV)/bin/snakemake --lint
+	$(VENV)/bin/snakefmt --check workflow
 
 # the unit tests without the slow ones (the end-to-end workflow runs, marked slow: pyproject.toml)
 test-fast: $(STAMP)

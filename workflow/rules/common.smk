@@ -24,10 +24,8 @@ from tohgs.config import (
     load_schema,
     validate_config,
 )
-from tohgs.assets.objects import check_split_sizes, read_catalog
+from tohgs.assets.splits import check_split_sizes
 from tohgs.assets.sources import select_objects, task_set
-from tohgs.grasps.filter import SCREEN_KEYS
-from tohgs.official.importer import read_import
 from tohgs.methods import method_components, of_chain
 from tohgs.models import CHECKED_KINDS
 from tohgs.models.guidance_settings import GuidanceSettings
@@ -65,7 +63,10 @@ GENERATION_RULES = (
 )
 
 SKIPPED_FILES = []  # (file, reason) of user-folder files that cannot be used
+MISSING_PACKAGES = []  # messages of object sources' packages that are not installed
 if OFFICIAL:
+    from tohgs.official.importer import read_import
+
     try:
         IMPORTED = read_import(OFFICIAL)
     except (ValueError, FileNotFoundError) as err:
@@ -90,7 +91,10 @@ else:
         OBJECTS = {
             spec.name: spec
             for spec in select_objects(
-                config["objects"], config["seed"], skipped=SKIPPED_FILES
+                config["objects"],
+                config["seed"],
+                skipped=SKIPPED_FILES,
+                missing=MISSING_PACKAGES,
             )
         }
         check_split_sizes(
@@ -102,6 +106,10 @@ else:
         raise WorkflowError(f"invalid configuration: {err}") from None
 for _file, _reason in SKIPPED_FILES:
     print(f"objects.sources.dir: skipped {_file}: {_reason}", file=sys.stderr)
+# A source package that is not installed: the workflow still parses (snakemake --lint needs no package but
+# Snakemake's), and the first job that reads one of its meshes stops with this message (object_source).
+for _message in MISSING_PACKAGES:
+    print(f"{_message} (no job can read these objects' meshes)", file=sys.stderr)
 
 
 def imported(path):
@@ -184,6 +192,8 @@ def _portable(path):
 def object_source(wildcards):
     """The source mesh of a file-based object (none for generated bricks)."""
     spec = OBJECTS[wildcards.object]
+    if spec.source == "ycb" and spec.path is None:  # its package is not installed
+        raise WorkflowError(f"{wildcards.object}: {MISSING_PACKAGES[0]}")
     return [_portable(spec.path)] if spec.path else []
 
 
@@ -209,6 +219,8 @@ def catalog_frame():
     path = checkpoints.catalog.get().output[0]
     key = (path, os.stat(path).st_mtime_ns)
     if key not in _CATALOG:
+        from tohgs.assets.objects import read_catalog
+
         _CATALOG.clear()
         _CATALOG[key] = read_catalog(path)
     return _CATALOG[key]
@@ -260,6 +272,8 @@ def prior_screen(wildcards):
     """The filter thresholds that screen the grasps before SD (prior_grasps.simulate: screened), or None."""
     if config["prior_grasps"]["simulate"] != "screened":
         return None
+    from tohgs.grasps.filter import SCREEN_KEYS
+
     return {k: config["prior_grasps"]["filter"][k] for k in SCREEN_KEYS}
 
 
