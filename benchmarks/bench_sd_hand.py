@@ -49,20 +49,6 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 from base_commit import commit_label  # noqa: E402
 
 
-def load_run_config(configfiles: list[Path]) -> dict:
-    """The run's config as the workflow builds it: the files merged in order, validated, defaults filled."""
-    import yaml
-
-    from tohgs.config import validate_config
-    from tohgs.settings import merge
-
-    cfg: dict = {}
-    for path in configfiles:
-        with open(path) as fh:
-            merge(cfg, yaml.safe_load(fh) or {})
-    return validate_config(cfg, base_dir=REPO)
-
-
 def check_results(results: Path, tasks: list[str]) -> None:
     """Stop with a message naming what a finished run would have and this folder lacks."""
     need = [results / "hand" / "hand.npz", results / "objects"] + [results / sub / t for t in tasks
@@ -215,12 +201,13 @@ def main(argv: list[str] | None = None) -> dict:
     if a.limit is not None and a.limit < 1:
         ap.error("--limit must be at least 1")
 
+    from tohgs.config import evaluation_sd_settings, load_configs
     from tohgs.hand import HandAssets
     from tohgs.hand.collision import MIN_TRIANGLES, collision_hand
     from tohgs.metrics.quality import SDSettings
     from tohgs.settings import settings_from
 
-    cfg = load_run_config(a.configfile)
+    cfg = load_configs(a.configfile, base_dir=REPO)
     tasks = a.tasks or list(cfg["scenes"]["tasks"])
     check_results(a.results, tasks)
     hand = HandAssets.load(a.results / "hand" / "hand.npz")
@@ -229,9 +216,7 @@ def main(argv: list[str] | None = None) -> dict:
         ap.error(f"--counts must lie in [{MIN_TRIANGLES}, {len(hand.closed_faces)}) for this hand, got {bad}")
     cache = a.cache_dir or Path(cfg["cache_dir"])
     variants = {"full": None, **{str(n): collision_hand(hand, n, cache) for n in a.counts}}
-    g = cfg["evaluation"]["sd_gravity"]
-    settings = settings_from(SDSettings, {**cfg["metrics"]["sd"], "gravity_direction": g["direction"],
-                                          "gravity": g["vector"]})
+    settings = settings_from(SDSettings, evaluation_sd_settings(cfg))
     qr = cfg["evaluation"]["qr"]
     rows = a.methods or list(cfg["tables"][a.table]["rows"])
     labels = {m: cfg["methods"][m]["label"] for m in rows if m in cfg["methods"]}

@@ -17,14 +17,14 @@ if str(REPO) not in sys.path:
 def evaluate_as_job(cfg: dict[str, Any], results: str | Path, task: str, method: str) -> pd.DataFrame:
     """The metric rows of ``results/predictions/<task>/<method>.zarr`` with the config's SD protocol
     (``metrics.sd`` with ``evaluation.sd_gravity``'s direction and vector, as ``workflow/rules/common.smk``'s
-    ``evaluation_sd_settings`` passes it), voxel pitch, PV mesh, SD hand and cache (relative to the run's folder)
+    ``evaluation_sd_settings`` passes it: :func:`tohgs.config.evaluation_sd_settings`), voxel pitch, PV mesh, SD hand and cache (relative to the run's folder)
     of ``cfg``, a validated config (:func:`tohgs.config.load_config`)."""
+    from tohgs.config import evaluation_sd_settings
     from tohgs.hand import HandAssets
     from tohgs.metrics.evaluate import evaluate_predictions
 
     results = Path(results)
-    g = cfg["evaluation"]["sd_gravity"]
-    sd = {**cfg["metrics"]["sd"], "gravity_direction": g["direction"], "gravity": g["vector"]}
+    sd = evaluation_sd_settings(cfg)
     cache = Path(cfg["cache_dir"])
     return evaluate_predictions(results / "predictions" / task / f"{method}.zarr",
                                 sorted((results / "scenes" / task).glob("*.zarr")), results / "objects",

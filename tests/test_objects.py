@@ -84,6 +84,63 @@ def test_catalog_from_folders(tmp_path):
         write_catalog([tmp_path / "nowhere"], split, 0, tmp_path / "c.csv")
 
 
+def _meta_folders(root, names):
+    """Accepted objects' folders with only what the catalog reads (meta.json)."""
+    dirs = []
+    for name in names:
+        source = name.split("-")[0]
+        d = root / name
+        d.mkdir(parents=True)
+        (d / "meta.json").write_text(json.dumps({
+            "name": name, "source": source, "task_set": "stacking" if source == "brick" else TASK_SET_OBJECTS,
+            "path": None, "status": "ok", "reason": "", "extents": [0.1, 0.05, 0.05]}))
+        dirs.append(d)
+    return dirs
+
+
+def test_ones_own_objects_never_move_another_object_to_another_split(tmp_path):
+    """The embedded pool's split is a seeded draw among its objects, exactly the fractions' sizes (the
+    benchmark's test set); a user folder's objects are split each by its name, or pinned, and adding or
+    removing one changes no other object's split."""
+    from tohgs.assets.splits import name_split
+
+    ycb = [f"ycb-{i:03d}-thing" for i in range(44)]
+    bricks = [f"brick-{i}" for i in range(23)]
+    mine = [f"dir-mesh-{i}" for i in range(12)]
+    split = {"objects": {"test": 0.36, "val": 0.0}, "bricks": {"test": 0.25, "val": 0.0}}
+
+    def catalog(names, tag, **kw):
+        dirs = _meta_folders(tmp_path / tag, names)
+        df = write_catalog(dirs, split, 0, tmp_path / tag / "catalog.csv", task_sets=["placing/shelving", "stacking"],
+                           **kw)
+        return dict(zip(df.name, df.split))
+
+    base = catalog(ycb + bricks, "base")
+    assert [s for n, s in base.items() if n.startswith("ycb")].count("test") == 16
+    assert [s for n, s in base.items() if n.startswith("brick")].count("test") == 6
+    with_mine = catalog(ycb + bricks + mine, "mine")
+    one_more = catalog(ycb + bricks + mine + ["dir-mesh-new"], "more")
+    one_less = catalog(ycb + bricks + mine[1:], "less")
+    for name, s in base.items():  # the embedded objects: as without any of one's own
+        assert with_mine[name] == one_more[name] == one_less[name] == s, name
+    for name in mine[1:]:  # one's own: each by its name
+        assert with_mine[name] == one_more[name] == one_less[name] == name_split(name, 0, 0.36, 0.0)
+    assert {with_mine[n] for n in mine} == {"train", "test"}  # 12 names: both splits drawn
+    pinned = catalog(ycb + bricks + mine, "pinned", dir_split="test")
+    assert all(pinned[n] == "test" for n in mine) and all(pinned[n] == base[n] for n in base)
+    # only one's own objects, all pinned to test: no training object, said with the fix
+    with pytest.raises(ValueError, match="0 training and 3 test objects .*objects.sources.dir.split"):
+        catalog(mine[:3] + bricks, "alone", dir_split="test")
+
+
+def test_name_split_draws_the_fractions():
+    from tohgs.assets.splits import name_split
+
+    got = [name_split(f"dir-{i}", 7, 0.3, 0.1) for i in range(4000)]
+    assert abs(got.count("test") / 4000 - 0.3) < 0.03 and abs(got.count("val") / 4000 - 0.1) < 0.02
+    assert got != [name_split(f"dir-{i}", 8, 0.3, 0.1) for i in range(4000)]  # the seed draws again
+
+
 def test_a_ycb_object_goes_through_the_objects_stage(tmp_path):
     """The YCB tuna can carries two stray single triangles: dropped, then rescaled into the graspable range,
     decomposed, and loadable by PyBullet with its mass."""

@@ -5,6 +5,7 @@ Each subcommand is the ``main(argv)`` of a module that also runs as ``python -m 
 =================  =====================  ==============================================================
 subcommand         module                 what it does
 =================  =====================  ==============================================================
+``grasp``          tohgs.own_object       grasps for your own mesh with a finished run's trained models
 ``export``         tohgs.export           a prediction store's grasps as hand meshes or MANO parameters
 ``view``           tohgs.viz.view         the 3D viewer of a finished run (or its static HTML export)
 ``check-config``   tohgs.config_files     config files read strictly and validated, before Snakemake
@@ -19,6 +20,7 @@ import sys
 
 #: subcommand -> (module with ``main(argv)``, one line of help)
 COMMANDS = {
+    "grasp": ("tohgs.own_object", "grasps for your own mesh (.obj, .stl, .ply) with a finished run's trained models"),
     "export": ("tohgs.export", "a prediction store's grasps as hand meshes (OBJ, PLY, GLB) or MANO parameters (NPZ)"),
     "view": ("tohgs.viz.view", "the 3D viewer of a finished run's results, or its static HTML export"),
     "check-config": ("tohgs.config_files", "check config files before snakemake --configfile"),

@@ -274,6 +274,14 @@ def method_setting_keys(kind: str, schema: Mapping[str, Any] | None = None) -> l
     return [*SAMPLING_KEYS, *schema["$defs"]["method_kinds"][kind].get("settings", [])]
 
 
+def evaluation_sd_settings(cfg: Mapping[str, Any]) -> dict[str, Any]:
+    """SD's settings in the evaluation, from a validated config: the physics of ``metrics.sd`` with the gravity
+    of ``evaluation.sd_gravity`` (its ``direction`` and ``vector``, under the names the SD settings use:
+    ``gravity_direction``, ``gravity``; the prior grasps' filter keeps ``metrics.sd``'s own gravity)."""
+    g = cfg["evaluation"]["sd_gravity"]
+    return {**copy.deepcopy(dict(cfg["metrics"]["sd"])), "gravity_direction": g["direction"], "gravity": g["vector"]}
+
+
 def job_settings(cfg: Mapping[str, Any], name: str, schema: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The prediction settings a job of method ``name`` (a validated config's) is given: the ``prediction``
     block overlaid with the method's ``settings`` (sub-blocks key by key), only those its kind reads
@@ -560,6 +568,18 @@ def load_config(path: Path | str, overrides: Mapping[str, Any] | None = None) ->
     if overrides:
         merge(cfg, overrides)
     return validate_config(cfg)
+
+
+def load_configs(paths: list[Path | str], base_dir: Path | str | None = None) -> dict[str, Any]:
+    """The config a run of ``snakemake --configfile PATHS...`` builds: the files read strictly
+    (:func:`tohgs.config_files.read_config_file`), merged in order over the schema's defaults, validated
+    (``base_dir``: where relative paths in them are resolved, the run's folder). No file: the default."""
+    from tohgs.config_files import read_config_file
+
+    cfg: dict[str, Any] = {}
+    for path in paths:
+        merge(cfg, read_config_file(path))
+    return validate_config(cfg, base_dir=base_dir)
 
 
 def drop_ground_truth_rows(cfg: dict[str, Any], reason: str) -> list[str]:

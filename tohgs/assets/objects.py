@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import time
 import zlib
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +34,7 @@ from tohgs.assets.manifest import record_object_files
 from tohgs.assets.mesh import (COLLISION_MESH, OBJECT_MESH, OBJECT_URDF, MeshError, MeshLimits, choose_scale,
                                load_mesh, mass_properties, normalise, repair_and_validate)
 from tohgs.assets.sources import TASK_SET_BRICKS, TASK_SET_OBJECTS, ObjectSpec, read_object_meta
-from tohgs.assets.splits import check_split_sizes, split_sizes
+from tohgs.assets.splits import check_split_sizes, name_split, split_sizes
 from tohgs.io import atomic_dir, atomic_path, write_json
 
 log = logging.getLogger(__name__)
@@ -176,8 +177,11 @@ def assign_splits(names: list[str], test_fraction: float, val_fraction: float, r
 
 def write_catalog(object_dirs: list[str | Path], split_cfg: dict[str, dict[str, float]], seed: int,
                   out_csv: str | Path, task_sets: list[str] | None = None,
-                  skipped: list[tuple[str, str]] | None = None) -> pd.DataFrame:
-    """Gather the objects' ``meta.json`` into ``catalog.csv`` with the split by object.
+                  skipped: list[tuple[str, str]] | None = None, dir_split: str | None = None) -> pd.DataFrame:
+    """Gather the objects' ``meta.json`` into ``catalog.csv`` with the split by object: the embedded
+    sources' accepted objects by a seeded draw among themselves (:func:`assign_splits`: exactly the sizes of
+    the fractions), a user folder's (source ``dir``) each by its name (:func:`tohgs.assets.splits.name_split`)
+    or all to ``dir_split``; so one's own objects never move an embedded object to another split.
 
     Args:
         object_dirs: the per-object folders of the objects stage.
@@ -189,12 +193,15 @@ def write_catalog(object_dirs: list[str | Path], split_cfg: dict[str, dict[str, 
         skipped: ``(file, reason)`` of the user folder's entries that never became objects
             (:func:`tohgs.assets.sources.dir_candidates`): rows of status ``skipped``, no name, the file in
             ``source_path``.
+        dir_split: ``objects.sources.dir.split``: ``train``, ``val`` or ``test`` for every user-folder object,
+            or None (each its own, by name).
 
     Returns:
         The catalog (one row per selected object and skipped file; rejected objects have split ``""``).
 
     Raises:
-        ValueError: a task set without training or test objects (the message lists the rejections).
+        ValueError: a task set without training or test objects (the message lists the rejections, or says
+            how the user folder's objects were split).
     """
     rows = []
     for d in object_dirs:
@@ -219,9 +226,21 @@ def write_catalog(object_dirs: list[str | Path], split_cfg: dict[str, dict[str, 
         check_split_sizes(ok.task_set.value_counts().to_dict(), split_cfg, task_sets, "accepted",
                           rejected or "no object was rejected")
     for k, (task_set, key) in enumerate([(TASK_SET_OBJECTS, "objects"), (TASK_SET_BRICKS, "bricks")]):
-        ok = df[(df.task_set == task_set) & (df.status == "ok")].name.tolist()
-        split = assign_splits(ok, split_cfg[key]["test"], split_cfg[key]["val"], np.random.default_rng([seed, 10 + k]))
-        df.loc[df.name.isin(ok), "split"] = df.loc[df.name.isin(ok), "name"].map(split)
+        accepted = df[(df.task_set == task_set) & (df.status == "ok")]
+        ok = accepted[accepted.source != "dir"].name.tolist()
+        frac = split_cfg[key]
+        split = assign_splits(ok, frac["test"], frac["val"], np.random.default_rng([seed, 10 + k])) if ok else {}
+        for name in accepted[accepted.source == "dir"].name:
+            split[name] = dir_split or name_split(name, seed, frac["test"], frac["val"])
+        df.loc[df.name.isin(split), "split"] = df.loc[df.name.isin(split), "name"].map(split)
+        if task_sets and task_set in task_sets and split:
+            got = Counter(split.values())
+            if not got["train"] or not got["test"]:
+                raise ValueError(
+                    f"objects.split.{key}: the {len(split)} accepted {task_set} objects give {got['train']} training "
+                    f"and {got['test']} test objects ({len(split) - len(ok)} of them from objects.sources.dir, "
+                    f"split {'by name' if dir_split is None else 'all to ' + dir_split}); the tasks need at least "
+                    "one of each: pin the folder's objects with objects.sources.dir.split, or add objects")
     df = df.sort_values(["task_set", "name"], kind="stable").reset_index(drop=True)
     with atomic_path(out_csv) as tmp:
         df.to_csv(tmp, index=False)

@@ -3,10 +3,14 @@ in each.
 
 Pure standard library: the workflow runs :func:`check_split_sizes` when Snakemake parses it, and parsing
 needs no package beyond Snakemake's own (``snakemake --lint`` in a bare Snakemake environment). Which object
-goes to which split is :func:`tohgs.assets.objects.assign_splits` (the catalog's job).
+goes to which split is the catalog's job (:func:`tohgs.assets.objects.write_catalog`): the embedded sources'
+objects by a seeded draw among themselves (:func:`tohgs.assets.objects.assign_splits`), a user folder's
+objects each by :func:`name_split` (or all to the split ``objects.sources.dir.split`` pins).
 """
 
 from __future__ import annotations
+
+import hashlib
 
 from tohgs.assets.sources import TASK_SET_BRICKS, TASK_SET_OBJECTS
 
@@ -53,3 +57,12 @@ def check_split_sizes(counts: dict[str, int], split_cfg: dict[str, dict[str, flo
                          f"objects (test fraction {frac['test']}, val {frac['val']}); the tasks need at least one "
                          f"{missing} object: select more objects (objects.sources) or change objects.split.{key}"
                          + (f" ({detail})" if detail else ""))
+
+
+def name_split(name: str, seed: int, test_fraction: float, val_fraction: float) -> str:
+    """The split of one object by its name alone: ``test`` where a uniform number drawn from the name and
+    ``seed`` (SHA-256) lies below ``test_fraction``, ``val`` below ``test_fraction + val_fraction``, else
+    ``train``. Another object added or removed changes nothing here; the sizes of a set are binomial, not
+    :func:`split_sizes`'."""
+    u = int.from_bytes(hashlib.sha256(f"{seed}:{name}".encode()).digest()[:8], "big") / 2.0**64
+    return "test" if u < test_fraction else "val" if u < test_fraction + val_fraction else "train"

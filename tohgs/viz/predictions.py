@@ -107,8 +107,8 @@ def plot_predictions(prediction_stores: list[str | Path], scene_stores: list[str
                     ax.imshow(world.render(eye, look, *size))
             axes[r, 0].text(-0.05, 0.5, f"{name} #{c}", rotation=90, ha="right", va="center", fontsize=7,
                             transform=axes[r, 0].transAxes)
-    fig.suptitle(f"{first_attrs['task']}: each method's first kept hand (initial | goal), the same configurations",
-                 fontsize=9)
+    fig.suptitle(f"{first_attrs['task']}: each method's first kept hand (initial | goal), the same configurations"
+                 if len(stores) > 1 else f"{first_attrs['task']}, {labels[0]}:\nthe first kept hand", fontsize=9)
     fig.tight_layout()
     save_figure(fig, out_png)
     log.info("wrote %s (%d configurations x %d methods)", out_png, len(rows), len(stores))

@@ -19,6 +19,7 @@ from tohgs.config_files import ConfigFileError, check_config_files
 from tohgs.config import (
     ConfigError,
     add_seed_replicas,
+    evaluation_sd_settings as evaluation_sd_settings_of,
     drop_ground_truth_rows,
     job_settings,
     load_schema,
@@ -478,14 +479,7 @@ def rule_resources(name):
 def evaluation_sd_settings():
     """SD's settings in the evaluation: the physics of ``metrics.sd`` with the gravity of
     ``evaluation.sd_gravity`` (the prior grasps keep ``metrics.sd``'s own)."""
-    g = config["evaluation"]["sd_gravity"]
-    return _canonical(
-        {
-            **config["metrics"]["sd"],
-            "gravity_direction": g["direction"],
-            "gravity": g["vector"],
-        }
-    )
+    return _canonical(evaluation_sd_settings_of(config))
 
 
 def robust_sd_settings(wildcards):

@@ -41,6 +41,7 @@ checkpoint catalog:
     params:
         code=code("catalog.py"),
         split=setting("objects", "split"),
+        dir_split=setting("objects", "sources", "dir", "split"),
         seed=setting("seed"),
         task_sets=TASK_SETS,
         skipped=[list(s) for s in SKIPPED_FILES],  # user-folder files that are no objects, with the reason
