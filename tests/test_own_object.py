@@ -90,6 +90,27 @@ def test_a_new_mesh_gets_grasps_exports_metrics_and_a_page(smoke_run, tmp_path, 
                   - hand.vertices(arrays["grasp_init"].reshape(-1, back.shape[-1]).astype(np.float64))).max() < 1e-6
     assert (out / "viewer.html").stat().st_size > 100_000  # the scene, embedded (rendered below, with chromium)
     assert (out / "grasps.png").stat().st_size > 10_000
+    # its configurations, as the scene file it wrote, give the same scenes back; one with an obstacle moved
+    # into the target is refused, naming the configuration, the bodies and the depth
+    import yaml
+
+    from tohgs.scene_file import SceneFileError
+
+    again = tmp_path / "again"
+    grasp_own_object(mesh, "placing", again, results, [SMOKE], n=2, formats=(), viewer=False,
+                     scene=out / "scene.yaml")
+    first, second = (read_scenes(d / "scenes" / "placing" / "dir-my-cup.zarr") for d in (out, again))
+    assert len(second) == 2 and np.abs(first.target_goal_pose - second.target_goal_pose).max() < 1e-5
+    assert [second.obstacles(c)[k][0] for c in range(2) for k in range(len(second.obstacles(c)))] == \
+        [first.obstacles(c)[k][0] for c in range(2) for k in range(len(first.obstacles(c)))]
+    doc = yaml.safe_load((out / "scene.yaml").read_text())
+    entry = doc["configurations"][1]
+    entry["obstacles"] = [{"object": first.obstacles(1)[0][0], "pose": entry["init"]}]
+    (tmp_path / "bad.yaml").write_text(yaml.safe_dump(doc))
+    with pytest.raises(SceneFileError, match=r"configurations\[1\]: at the initial pose the target reaches .* mm into "
+                                             r"obstacle 0"):
+        grasp_own_object(mesh, "placing", tmp_path / "bad", results, [SMOKE], scene=tmp_path / "bad.yaml")
+    assert not (tmp_path / "bad").exists()
     # the same object again into the same folder: refused, the first result intact
     with pytest.raises(OwnObjectError, match="output folder exists"):
         grasp_own_object(mesh, "placing", out, results, [SMOKE])

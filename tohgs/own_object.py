@@ -4,7 +4,7 @@ trained models (``tohgs grasp MESH --task placing``).
 The mesh is repaired, rescaled and decomposed by the objects stage's own code (:func:`tohgs.assets.objects.
 prepare_object`: the same checks, limits and size range as the run's config), placed in configurations of
 the task by the scenes stage's generator (:func:`tohgs.sim.scenes.make_scene_store`: the run's support and
-its accepted objects as obstacles, or base bricks for Stacking), given its distance maps
+its accepted objects as obstacles, or base bricks for Stacking) or read from a scene file (``--scene``), given its distance maps
 (:func:`tohgs.data.build_maps.make_map_shard`, a test shard without ground truth), grasped by a method whose
 models the run has trained (:func:`tohgs.methods.predict.predict`), and evaluated as the workflow evaluates
 (:func:`tohgs.metrics.evaluate.evaluate_predictions`: PV, SD, Init / Goal OPP, the QR verdict). The output
@@ -16,7 +16,9 @@ read a run, plus:
   parameters (``<task>_<method>.npz``; docs/formats.md);
 - ``grasps.png``: each configuration with the method's first kept hand at the initial and the goal pose;
 - ``viewer.html``: a self-contained page of the configurations with their grasps (the run's static viewer);
-- ``summary.json``: the object's scale, the configurations, each grasp's metrics and the time of each step.
+- ``summary.json``: the object's scale, the configurations, each grasp's metrics and the time of each step;
+- ``scene.yaml``: the configurations used, as a scene file (:mod:`tohgs.scene_file`): edit it and pass it back
+  with ``--scene`` to grasp the object where you put it.
 
 The object is not trained on: its grasps are the models' answer for an object they never saw, as for the
 run's test objects. The folder is written whole or not at all (built beside it, then renamed into place).
@@ -81,8 +83,8 @@ def _models_of(results: Path, task: str, method: str, cfg: dict[str, Any]) -> li
 
 def grasp_own_object(mesh: str | Path, task: str, out: str | Path, results: str | Path = "results",
                      configfiles: list[str | Path] = (), method: str = "ours", n: int = 16, configs: int = 1,
-                     formats: tuple[str, ...] = ("obj", "npz"), viewer: bool = True, seed: int | None = None
-                     ) -> dict[str, Any]:
+                     formats: tuple[str, ...] = ("obj", "npz"), viewer: bool = True, seed: int | None = None,
+                     scene: str | Path | None = None) -> dict[str, Any]:
     """Grasps of ``method`` for the mesh ``mesh`` in ``configs`` configurations of ``task``, written to ``out``
     (module docstring); returns the summary written to ``out/summary.json``.
 
@@ -96,14 +98,18 @@ def grasp_own_object(mesh: str | Path, task: str, out: str | Path, results: str 
             throughout (objects, scenes, maps, prediction, evaluation).
         method: a method of the run's config whose models the run has (default ``ours``).
         n: grasps per configuration (the config's ``prediction.samples`` for this run).
-        configs: configurations of the task to place the object in.
+        configs: configurations of the task to place the object in (without ``scene``).
         formats: the exports, of ``obj``, ``ply``, ``glb``, ``npz``.
         viewer: write ``viewer.html``.
         seed: the seed of the object's scale, scenes and sampling (default: the run's).
+        scene: a scene file (:mod:`tohgs.scene_file`: the configurations, as the ``scene.yaml`` this writes
+            holds them) instead of configurations made by the scenes stage's generator.
 
     Raises:
         OwnObjectError: a bad mesh (not found, refused by the objects stage: the reason), a task or method
             without trained models, an output folder that exists; each names the file and the fix.
+        tohgs.scene_file.SceneFileError: a scene file that cannot be used (bodies that reach into each
+            other among its reasons), naming the file and the configuration.
     """
     from tohgs.config import load_configs
     from tohgs.io import atomic_dir, write_json
@@ -114,6 +120,8 @@ def grasp_own_object(mesh: str | Path, task: str, out: str | Path, results: str 
         raise OwnObjectError(f"--task {task!r}: one of {', '.join(TASKS)}")
     if not mesh.is_file():
         raise OwnObjectError(f"{mesh}: no such mesh file")
+    if scene is not None and not Path(scene).is_file():
+        raise OwnObjectError(f"{scene}: no such scene file")
     if mesh.suffix.lower() not in (".obj", ".stl", ".ply"):
         raise OwnObjectError(f"{mesh}: a mesh file is .obj, .stl or .ply, not {mesh.suffix or 'no suffix'!r}")
     if out.exists():
@@ -135,7 +143,8 @@ def grasp_own_object(mesh: str | Path, task: str, out: str | Path, results: str 
 
     with atomic_dir(out) as tmp:
         tmp = Path(tmp)
-        summary = _run(mesh, task, tmp, results, cfg, chain, n, configs, times)
+        summary = _run(mesh, task, tmp, results, cfg, chain, n, configs, times, scene)
+        configs = summary["configurations"]
         tick = time.perf_counter()
         _exports(tmp, task, chain[-1], formats, viewer, configs, cfg)
         times["exports"] = time.perf_counter() - tick
@@ -148,7 +157,7 @@ def grasp_own_object(mesh: str | Path, task: str, out: str | Path, results: str 
 
 
 def _run(mesh: Path, task: str, work: Path, results: Path, cfg: dict[str, Any], chain: list[str], n: int,
-         configs: int, times: dict[str, float]) -> dict[str, Any]:
+         configs: int, times: dict[str, float], scene: str | Path | None = None) -> dict[str, Any]:
     """The stages, in ``work`` (the output folder being built); fills ``times`` per step."""
     import numpy as np
 
@@ -161,6 +170,8 @@ def _run(mesh: Path, task: str, work: Path, results: Path, cfg: dict[str, Any], 
     from tohgs.methods.predict import predict
     from tohgs.metrics.evaluate import evaluate_predictions
     from tohgs.metrics.tables import QualityThresholds, quality_ratio
+    from tohgs.data.scenes import write_scenes
+    from tohgs.scene_file import read_scene_file, write_scene_file
     from tohgs.sim.scenes import make_scene_store
 
     seed = cfg["seed"]
@@ -187,12 +198,18 @@ def _run(mesh: Path, task: str, work: Path, results: Path, cfg: dict[str, Any], 
              meta["scale"], np.round(meta["extents"], 3).tolist(), meta["n_collision_parts"])
 
     tick = time.perf_counter()
-    pool = accepted_objects([objects_dir / p.name for p in run_objects] + [objects_dir / name], ts)
-    scene_cfg = {**cfg["scenes"], "n_configs": configs}
     scene_store = work / "scenes" / task / f"{name}.zarr"
     scene_store.parent.mkdir(parents=True)
     supports = objects_dir / "supports" / "supports.json"
-    make_scene_store(task, name, pool, objects_dir, supports, scene_cfg, seed, scene_store)
+    if scene is None:
+        pool = accepted_objects([objects_dir / p.name for p in run_objects] + [objects_dir / name], ts)
+        scenes = make_scene_store(task, name, pool, objects_dir, supports, {**cfg["scenes"], "n_configs": configs},
+                                  seed, scene_store)
+    else:
+        scenes = read_scene_file(scene, task, name, objects_dir, supports)
+        write_scenes(scenes, scene_store)
+        configs = len(scenes)
+    write_scene_file(scenes, work / "scene.yaml")
     times["scenes"] = time.perf_counter() - tick
 
     tick = time.perf_counter()
@@ -276,18 +293,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--method", default="ours", help="a method of the run whose models exist (default ours)")
     ap.add_argument("-n", type=int, default=16, help="grasps per configuration (default 16)")
     ap.add_argument("--configs", type=int, default=1, help="configurations of the task (default 1)")
+    ap.add_argument("--scene", type=Path, default=None,
+                    help="a scene file of your configurations (the scene.yaml an output folder holds, edited)")
     ap.add_argument("--format", dest="formats", nargs="*", default=["obj", "npz"], choices=["obj", "ply", "glb", "npz"],
                     help="exports (default obj npz)")
     ap.add_argument("--no-viewer", action="store_true", help="no viewer.html")
     ap.add_argument("--seed", type=int, default=None, help="default: the run's seed")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default grasps/<mesh stem>-<task>)")
     a = ap.parse_args(argv)
+    from tohgs.scene_file import SceneFileError
+
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     out = a.out or Path("grasps") / f"{a.mesh.stem}-{a.task}"
     try:
         s = grasp_own_object(a.mesh, a.task, out, a.results, a.configfile, a.method, a.n, a.configs,
-                             tuple(a.formats), not a.no_viewer, a.seed)
-    except OwnObjectError as err:
+                             tuple(a.formats), not a.no_viewer, a.seed, a.scene)
+    except (OwnObjectError, SceneFileError) as err:
         print(f"tohgs grasp: {err}", file=sys.stderr)
         return 2
     secs = s["seconds"]
