@@ -124,8 +124,8 @@ def test_the_cache_round_trips_and_a_damaged_entry_is_rebuilt_with_a_warning(han
     assert other.n_triangles == 1000 and len(list((tmp_path / "sd_hand").glob("*.npz"))) == 2
 
 
-def test_the_setting_is_full_by_default_and_validates(default_config, hand):
-    assert validate_config({})["evaluation"]["sd_hand"] == "full"
+def test_the_setting_is_the_official_resolution_by_default_and_validates(default_config, hand):
+    assert validate_config({})["evaluation"]["sd_hand"] == 1538  # MANO's triangles, as the official evaluation
     assert load_schema()["properties"]["evaluation"]["properties"]["sd_hand"]["minimum"] == MIN_TRIANGLES
     for good in ("full", 1600, MIN_TRIANGLES):
         assert validate_config({"evaluation": {"sd_hand": good}})["evaluation"]["sd_hand"] == good
