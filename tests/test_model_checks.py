@@ -68,7 +68,7 @@ def test_local_mixing_reads_the_neighbours_values(built):
     """With ``local_k`` a point's output depends on its nearest points' noisy values (and not on far ones
     through that path); without it, a network whose attention is switched off reads only its own."""
     from tohgs.data.batch import Batch
-    from tohgs.models.contact_diffuser import nearest_neighbours
+    from tohgs.geometry.neighbours import nearest_neighbours
 
     tmp = built[0]
     batch = Batch.collate([MapDataset([tmp / "shard-0.zarr"], per="grasp")[0]])

@@ -11,6 +11,7 @@ import torch
 
 from tohgs.data.batch import Batch
 from tohgs.data.maps import MapShard
+from tohgs.geometry.neighbours import nearest_neighbours
 from tohgs.methods import GROUND_TRUTH, NO_CONTACT
 from tohgs.settings import build_blocks
 
@@ -145,8 +146,6 @@ def smooth_contact(points: torch.Tensor, contact: torch.Tensor, k: int) -> torch
     """
     if k <= 1:
         return contact
-    from tohgs.models.contact_diffuser import nearest_neighbours
-
     k = min(k, points.shape[0])
     own = torch.arange(points.shape[0], device=points.device)[:, None]
     nn = torch.cat([own, nearest_neighbours(points[None], k - 1)[0]], -1)  # (N, k): itself, then its k - 1 nearest

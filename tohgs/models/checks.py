@@ -34,13 +34,13 @@ import numpy as np
 import torch
 
 from tohgs.data.maps import MapDataset
+from tohgs.geometry.neighbours import nearest_neighbours
 from tohgs.hand.model import HandModel
 from tohgs.hand.rotations import axis_angle_to_matrix
 from tohgs.data.batch import Batch
 from tohgs.models import CHECKED_KINDS
 from tohgs.models.checkpoint import load_component
 from tohgs.models.diffusion import sample
-from tohgs.models.contact_diffuser import nearest_neighbours
 from tohgs.models.grasp_diffuser import GraspCondition
 
 log = logging.getLogger(__name__)

@@ -28,6 +28,7 @@ from torch import nn
 
 from tohgs.data.batch import Batch
 from tohgs.geometry.frames import scene_frame
+from tohgs.geometry.neighbours import nearest_neighbours
 from tohgs.models.component import Component
 from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, TimeMLP, sample
 from tohgs.models.guidance import GuidanceSettings, contact_guidance_step, near_scene_weights
@@ -129,13 +130,6 @@ class ContactCondition:
 
     embedding: torch.Tensor
     neighbours: torch.Tensor | None
-
-
-def nearest_neighbours(points: torch.Tensor, k: int) -> torch.Tensor:
-    """(B, N, k) indices of each of (B, N, 3) points' k nearest other points (Euclidean)."""
-    d = torch.cdist(points, points)
-    d.diagonal(dim1=1, dim2=2).fill_(float("inf"))
-    return d.topk(k, dim=-1, largest=False).indices
 
 
 class ContactDiffuser(Component):
