@@ -36,7 +36,7 @@ from tohgs.data.batch import Batch
 from tohgs.geometry.contact_parts import N_PARTS, PartContact, part_contact
 from tohgs.hand.model import HandModel
 from tohgs.models.component import Component
-from tohgs.models.grasp_cvae import _mlp
+from tohgs.models.layers import mlp
 from tohgs.models.pointnet2 import PointNet2, PointNet2Config
 from tohgs.settings import settings_from
 
@@ -75,9 +75,9 @@ class _Stage(nn.Module):
 
     def __init__(self, in_dim: int, target_dim: int, out_dim: int, global_dim: int, latent: int, hidden: tuple):
         super().__init__()
-        self.encoder = _mlp([in_dim + target_dim, *hidden], last_plain=False)
+        self.encoder = mlp([in_dim + target_dim, *hidden], last_plain=False)
         self.to_stats = nn.Linear(hidden[-1] + global_dim, 2 * latent)
-        self.decoder = _mlp([in_dim + latent, *hidden, out_dim])
+        self.decoder = mlp([in_dim + latent, *hidden, out_dim])
         self.latent = latent
 
     def posterior(self, inputs: torch.Tensor, target: torch.Tensor, glob: torch.Tensor

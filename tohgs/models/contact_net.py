@@ -28,7 +28,8 @@ from tohgs.data.batch import Batch
 from tohgs.geometry.hand_object import contact_values
 from tohgs.hand.model import HandModel
 from tohgs.models.component import Component
-from tohgs.models.grasp_cvae import ENCODER_SCALE, _mlp, bbox_diagonal
+from tohgs.models.grasp_cvae import ENCODER_SCALE, bbox_diagonal
+from tohgs.models.layers import mlp
 from tohgs.models.pointnet2 import PointNet
 from tohgs.settings import settings_from
 
@@ -91,7 +92,7 @@ class ContactNet(Component):
         h0 = cfg.head[0]
         self.point_in = nn.Linear(self.object_encoder.local_dim + 1, h0)
         self.pooled_in = nn.Linear(self.object_encoder.global_dim + self.hand_encoder.global_dim, h0, bias=False)
-        self.head = nn.Sequential(nn.LayerNorm(h0), nn.GELU(), _mlp([*cfg.head, 1]))
+        self.head = nn.Sequential(nn.LayerNorm(h0), nn.GELU(), mlp([*cfg.head, 1]))
         self.register_buffer("alpha_contact", torch.tensor(100.0))
 
     def prepare(self, data, task: str, hand: HandModel | None = None) -> None:

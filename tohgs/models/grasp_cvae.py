@@ -46,6 +46,7 @@ from tohgs.geometry.hand_object import contact_values, inside_hand, vertex_norma
 from tohgs.geometry.rot6d import VECTOR_DIM, grasp_from_palm_rot6d, palm_rot6d
 from tohgs.hand.model import HandModel
 from tohgs.models.component import Component, seen_grasps
+from tohgs.models.layers import mlp
 from tohgs.models.pointnet2 import PointNet
 from tohgs.settings import settings_from
 
@@ -83,16 +84,6 @@ class GraspCVAEConfig:
         return settings_from(GraspCVAEConfig, d)  # YAML lists as tuples; an unknown key named
 
 
-def _mlp(sizes: list[int], last_plain: bool = True) -> nn.Sequential:
-    """Linear layers with LayerNorm + GELU between them (none after the last when ``last_plain``)."""
-    layers: list[nn.Module] = []
-    for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:])):
-        layers.append(nn.Linear(a, b))
-        if not (last_plain and i == len(sizes) - 2):
-            layers += [nn.LayerNorm(b), nn.GELU()]
-    return nn.Sequential(*layers)
-
-
 def bbox_diagonal(points: torch.Tensor) -> torch.Tensor:
     """(B,) the axis-aligned bounding-box diagonal of (B, N, 3) points, m."""
     return (points.max(1).values - points.min(1).values).norm(dim=-1)
@@ -119,9 +110,9 @@ class GraspCVAE(Component):
         self.object_encoder = PointNet(1 + int(cfg.contact_channel), list(cfg.object_mlp))
         self.hand_encoder = PointNet(3, list(cfg.hand_mlp))  # posed xyz, with each vertex's rest xyz
         fo, fh = self.object_encoder.global_dim, self.hand_encoder.global_dim
-        self.encoder = _mlp([fo + fh, *cfg.encoder], last_plain=False)
+        self.encoder = mlp([fo + fh, *cfg.encoder], last_plain=False)
         self.to_stats = nn.Linear(cfg.encoder[-1] if cfg.encoder else fo + fh, 2 * cfg.latent)
-        self.decoder = _mlp([cfg.latent + fo, *cfg.decoder, VECTOR_DIM])
+        self.decoder = mlp([cfg.latent + fo, *cfg.decoder, VECTOR_DIM])
         self.register_buffer("grasp_mean", torch.zeros(VECTOR_DIM))
         self.register_buffer("grasp_std", torch.ones(VECTOR_DIM))
         self.register_buffer("wrist", torch.zeros(3))

@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 import torch
 from torch import nn
 
+from tohgs.models import layers
+
 
 def farthest_point_sample(xyz: torch.Tensor, npoint: int, generator: torch.Generator | None = None) -> torch.Tensor:
     """(B, npoint) indices of farthest-point samples of (B, N, 3) points; the first index is random when a
@@ -59,13 +61,6 @@ def ball_query(radius: float, nsample: int, xyz: torch.Tensor, centres: torch.Te
     return idx
 
 
-def _mlp(channels: list[int]) -> nn.Sequential:
-    layers: list[nn.Module] = []
-    for a, b in zip(channels[:-1], channels[1:]):
-        layers += [nn.Linear(a, b), nn.LayerNorm(b), nn.GELU()]
-    return nn.Sequential(*layers)
-
-
 class SetAbstraction(nn.Module):
     """Sample ``npoint`` centres, group ``nsample`` neighbours within ``radius``, shared MLP, max-pool.
     ``npoint = 0`` groups everything into one global feature."""
@@ -73,7 +68,7 @@ class SetAbstraction(nn.Module):
     def __init__(self, npoint: int, radius: float, nsample: int, in_channels: int, mlp: list[int]):
         super().__init__()
         self.npoint, self.radius, self.nsample = npoint, radius, nsample
-        self.mlp = _mlp([in_channels + 3, *mlp])
+        self.mlp = layers.mlp([in_channels + 3, *mlp], last_plain=False)
 
     def forward(self, xyz: torch.Tensor, feats: torch.Tensor | None, ordered: bool = False
                 ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -106,7 +101,7 @@ class FeaturePropagation(nn.Module):
 
     def __init__(self, in_channels: int, mlp: list[int]):
         super().__init__()
-        self.mlp = _mlp([in_channels, *mlp])
+        self.mlp = layers.mlp([in_channels, *mlp], last_plain=False)
 
     def forward(self, xyz_fine: torch.Tensor, xyz_coarse: torch.Tensor, feats_fine: torch.Tensor | None,
                 feats_coarse: torch.Tensor) -> torch.Tensor:
@@ -185,7 +180,7 @@ class PointNet(nn.Module):
 
     def __init__(self, in_channels: int, mlp: list[int]):
         super().__init__()
-        self.mlp = _mlp([in_channels + 3, *mlp])
+        self.mlp = layers.mlp([in_channels + 3, *mlp], last_plain=False)
         self.local_dim = self.global_dim = mlp[-1]
 
     def forward(self, xyz: torch.Tensor, feats: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -24,7 +24,7 @@ import torch
 
 from tohgs.data.batch import Batch
 from tohgs.models.component import Component
-from tohgs.models.grasp_cvae import _mlp
+from tohgs.models.layers import mlp
 from tohgs.settings import settings_from
 
 N_FINGER = 45  # the finger numbers of a grasp (15 joints x 3, axis-angle)
@@ -58,8 +58,8 @@ class PosePrior(Component):
     def __init__(self, cfg: PosePriorConfig):
         super().__init__()
         self.cfg = cfg
-        self.encoder = _mlp([N_FINGER, *cfg.hidden, 2 * cfg.latent])
-        self.decoder = _mlp([cfg.latent, *reversed(cfg.hidden), N_FINGER])
+        self.encoder = mlp([N_FINGER, *cfg.hidden, 2 * cfg.latent])
+        self.decoder = mlp([cfg.latent, *reversed(cfg.hidden), N_FINGER])
         self.register_buffer("mean", torch.zeros(N_FINGER))
         self.register_buffer("std", torch.ones(N_FINGER))
 
