@@ -13,7 +13,8 @@ from torch import nn
 from helpers import SMALL_PN
 from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
 from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, sample, timestep_embedding
-from tohgs.models.grasp_diffuser import GraspCondition, GraspDiffuser, GraspDiffuserConfig, grasp_losses, vertex_normals
+from tohgs.geometry.hand_object import contact_values, vertex_normals
+from tohgs.models.grasp_diffuser import GraspCondition, GraspDiffuser, GraspDiffuserConfig, grasp_losses
 from tohgs.data.batch import Batch
 from tohgs.models.train import EMA, cosine_with_warmup
 
@@ -231,8 +232,6 @@ def test_grasp_losses_vanish_for_the_truth_and_grow_with_error(hand):
     with torch.no_grad():
         hv = hand(grasp).vertices
     pts = hv[:, ::25] + 0.004 * vertex_normals(hv, hand.closed_faces)[:, ::25]  # points just outside the hand
-    from tohgs.models.grasp_diffuser import contact_values
-
     contact, _ = contact_values(pts, hv, 100.0)
     with torch.no_grad():
         cond = model.condition(pts, torch.zeros_like(pts), contact)

@@ -28,7 +28,7 @@ are for its units, ours are for the units below and are config values):
 - ``L_recon``: squared distance of the decoded hand's vertices to the true hand's, summed (m^2);
 - ``KL``: of the posterior from N(0, I), summed over the latent;
 - ``L_pen``, ``L_cons``: GraspDiffuser's penetration and contact-consistency terms
-  (:func:`tohgs.models.grasp_diffuser.grasp_losses`' definitions, point sums scaled to 2048 points).
+  (:mod:`tohgs.models.hand_object_loss`, the two models' one definition: point sums scaled to 2048 points).
 
 Shapes: points (B, N, 3) m (network frame), contact (B, N) in [0, 1], grasp (B, 51).
 """
@@ -42,15 +42,14 @@ from torch import nn
 
 from tohgs.data.batch import Batch
 from tohgs.geometry.grasp import GRASP_DIM
-from tohgs.geometry.hand_object import contact_values, inside_hand, vertex_normals
 from tohgs.geometry.rot6d import VECTOR_DIM, grasp_from_palm_rot6d, palm_rot6d
 from tohgs.hand.model import HandModel
 from tohgs.models.component import Component, seen_grasps
+from tohgs.models.hand_object_loss import hand_object_terms, weighted_pen_cons
 from tohgs.models.layers import mlp
 from tohgs.models.pointnet2 import PointNet
 from tohgs.settings import settings_from
 
-PAPER_POINTS = 2048  # the point sums of L_pen and L_cons are scaled to this many points
 # The PointNets read coordinates (and the bounding-box diagonal) in decimetres: in metres a hand or an
 # object spans about 0.2 units, so the first layer's output is its bias plus a small xyz term, and the
 # LayerNorm after it all but removes the geometry (a model trained so did not learn: its posterior
@@ -200,8 +199,7 @@ class GraspCVAE(Component):
         terms["kl"] = 0.5 * (mu**2 + logvar.exp() - 1 - logvar).sum(-1)
         c = self.cfg
         weighted = {"param": c.w_param * terms["param"].mean(), "recon": c.w_recon * terms["recon"].mean(),
-                    "kl": c.w_kl * terms["kl"].mean(), "pen": c.w_pen * terms["pen"].clamp(max=1.0).mean(),
-                    "cons": c.w_cons * terms["cons"].mean()}
+                    "kl": c.w_kl * terms["kl"].mean(), **weighted_pen_cons(terms, c.w_pen, c.w_cons)}
         return {"loss": sum(weighted.values()), **{k: v.mean() for k, v in terms.items()},
                 **{f"w_{k}": v for k, v in weighted.items()}}
 
@@ -210,15 +208,10 @@ class GraspCVAE(Component):
         """The per-sample (B,) parameter, vertex, penetration and consistency terms of (B, 51) decoded grasps
         (their (B, 54) normalised vectors ``vec``) against the batch's true grasps (whose (B, V, 3) vertices
         are ``true_v``)."""
-        scale = PAPER_POINTS / batch.points.shape[1]
         l_param = ((vec - self.normalise(batch.grasp)) ** 2).sum(-1)
         pred_v = hand(pred).vertices
-        l_recon = ((pred_v - true_v) ** 2).sum((-1, -2))
-        c_pred, idx = contact_values(batch.points, pred_v, self._training["alpha_contact"])
-        inside, offset = inside_hand(batch.points, pred_v, vertex_normals(pred_v, hand.closed_faces), idx)
-        l_pen = 100.0 * scale * (inside * (offset**2).sum(-1) * (1 + 3 * (1 - batch.contact))).sum(-1)
-        l_cons = scale * ((c_pred - batch.contact) ** 2 * (1 + 5 * batch.contact)).sum(-1)
-        return {"param": l_param, "recon": l_recon, "pen": l_pen, "cons": l_cons}
+        return {"param": l_param, **hand_object_terms(batch.points, pred_v, true_v, batch.contact, hand.closed_faces,
+                                                      self._training["alpha_contact"])}
 
     @torch.no_grad()
     def reconstruct(self, batch: Batch, hand: HandModel) -> torch.Tensor:

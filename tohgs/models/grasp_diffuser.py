@@ -76,18 +76,17 @@ from torch import nn
 from tohgs.data.batch import Batch
 from tohgs.geometry.frames import contact_frame_3d
 from tohgs.geometry.grasp import GRASP_DIM
-from tohgs.geometry.hand_object import contact_values, inside_hand, vertex_normals
 from tohgs.geometry.rot6d import grasp_from_palm_rot6d, palm_rot6d
 from tohgs.hand.model import HandModel
 from tohgs.hand.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from tohgs.models.component import Component, seen_grasps
 from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, TimeMLP, sample
 from tohgs.models.guidance import GuidanceEnergy, GuidanceSettings, guidance_step
+from tohgs.models.hand_object_loss import hand_object_terms, weighted_pen_cons
 from tohgs.models.pointnet2 import PointNet, PointNet2, PointNet2Config
 
 LOSS_WEIGHTS = {"placing": (15.0, 1.0, 5.0, 0.002), "shelving": (15.0, 1.0, 5.0, 0.002),
                 "stacking": (10.0, 1.0, 3.0, 0.005)}
-PAPER_POINTS = 2048  # the point sums of L_pen and L_cons are scaled to this many points
 CONTEXTS = ("global", "tokens")
 FRAMES = ("network", "contact", "canonical")
 ORIGINS = ("centroid", "surface")
@@ -514,9 +513,9 @@ def grasp_losses(model: GraspDiffuser, hand: HandModel, x0_hat: torch.Tensor, x0
                  contact: torch.Tensor, alpha_contact: float) -> dict[str, torch.Tensor]:
     """The four loss terms per sample (unweighted, unclamped; each (B,)) of predicted normalised vectors
     ``x0_hat`` (B, D) against the truth ``x0``, on the condition's object points (B, N, 3, in the
-    network's frame) with their true contact map (B, N)."""
+    network's frame) with their true contact map (B, N): ``diff`` here, the hand-object terms ``recon``,
+    ``pen`` and ``cons`` from :func:`tohgs.models.hand_object_loss.hand_object_terms`."""
     points = cond.points
-    scale = PAPER_POINTS / points.shape[1]
     err = x0_hat - x0
     if model.cfg.diff_units == "official":  # in the vector's own units (m, rad): the official code's balance
         err = err * model.grasp_std
@@ -524,12 +523,7 @@ def grasp_losses(model: GraspDiffuser, hand: HandModel, x0_hat: torch.Tensor, x0
     pred_v = hand(model.in_frame_grasp(x0_hat)).vertices
     with torch.no_grad():
         true_v = hand(model.in_frame_grasp(x0)).vertices
-    l_recon = ((pred_v - true_v) ** 2).sum((-1, -2))
-    c_pred, idx = contact_values(points, pred_v, alpha_contact)
-    inside, offset = inside_hand(points, pred_v, vertex_normals(pred_v, hand.closed_faces), idx)
-    l_pen = 100.0 * scale * (inside * (offset**2).sum(-1) * (1 + 3 * (1 - contact))).sum(-1)
-    l_cons = scale * ((c_pred - contact) ** 2 * (1 + 5 * contact)).sum(-1)
-    return {"diff": l_diff, "recon": l_recon, "pen": l_pen, "cons": l_cons}
+    return {"diff": l_diff, **hand_object_terms(points, pred_v, true_v, contact, hand.closed_faces, alpha_contact)}
 
 
 def weighted_terms(terms: dict[str, torch.Tensor], weights: tuple[float, float, float, float]) -> dict[str, torch.Tensor]:
@@ -537,7 +531,7 @@ def weighted_terms(terms: dict[str, torch.Tensor], weights: tuple[float, float, 
     ``w_pen mean min(L_pen, 1)``, ``w_cons mean L_cons`` (clamps per sample)."""
     w_diff, w_recon, w_pen, w_cons = weights
     return {"diff": w_diff * terms["diff"].mean(), "recon": w_recon * terms["recon"].clamp(max=1.0).mean(),
-            "pen": w_pen * terms["pen"].clamp(max=1.0).mean(), "cons": w_cons * terms["cons"].mean()}
+            **weighted_pen_cons(terms, w_pen, w_cons)}
 
 
 COMPONENT = GraspDiffuser
