@@ -31,12 +31,14 @@ from typing import Any
 
 import numpy as np
 
+from tohgs.hand.layout import FINGER_POSE_DIM, GLOBAL_ROTATION_DIM, TRANSLATION_DIM
+
 log = logging.getLogger(__name__)
 
 FORMATS = ("obj", "ply", "glb", "npz")
 POSES = ("init", "goal")
 #: The 51-number vector's parts, in its order: (name, width).
-PARTS = (("transl", 3), ("global_orient", 3), ("hand_pose", 45))
+PARTS = (("transl", TRANSLATION_DIM), ("global_orient", GLOBAL_ROTATION_DIM), ("hand_pose", FINGER_POSE_DIM))
 BETAS = 10
 
 

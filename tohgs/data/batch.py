@@ -14,7 +14,7 @@ scene           (B, Ns, 3)   scene cloud (support, obstacles, base; never the ta
 scene_normals   (B, Ns, 3)   the scene points' outward unit normals
 goal_transform  (B, 4, 4)    ``T_goal T_init^-1`` in the network frame (carries the target)
 contact         (B, N)       contact map (alpha 100) of the grasp's hand, in [0, 1]; or None
-grasp           (B, 51)      the grasp at the initial pose (:data:`tohgs.geometry.grasp.GRASP_DIM`); or None
+grasp           (B, 51)      the grasp at the initial pose (:data:`tohgs.hand.layout.GRASP_DIM`); or None
 ==============  ===========  =================================================================
 
 The scene cloud is the same at the initial and the goal pose (the obstacles do not move);

@@ -28,10 +28,11 @@ import trimesh
 
 from tohgs.assets.mesh import object_mesh
 from tohgs.data.maps import MapShard, write_map_shard
-from tohgs.geometry.grasp import GRASP_DIM, pose_matrix
+from tohgs.geometry.grasp import pose_matrix
 from tohgs.geometry.maps import nearest_distance, normalised_map, sample_surface, scene_cloud
 from tohgs.geometry.scene import scene_meshes
 from tohgs.hand.assets import HandAssets
+from tohgs.hand.layout import GRASP_DIM
 
 log = logging.getLogger(__name__)
 

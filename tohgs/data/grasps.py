@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from tohgs.data.store import read_store, write_store
-from tohgs.geometry.grasp import GRASP_DIM
+from tohgs.hand.layout import GRASP_DIM
 
 SCHEMA = "tohgs.prior_grasps"
 SCHEMA_VERSION = 1

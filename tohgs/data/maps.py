@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from tohgs.data.store import check_shapes, read_store, write_store
-from tohgs.geometry.grasp import GRASP_DIM
+from tohgs.hand.layout import GRASP_DIM
 
 SCHEMA = "tohgs.maps"
 SCHEMA_VERSION = 2  # 2: scene_normals

@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from tohgs.data.store import StoreLayout, check_shapes
-from tohgs.geometry.grasp import GRASP_DIM
+from tohgs.hand.layout import GRASP_DIM
 
 SCHEMA = "tohgs.predictions"
 SCHEMA_VERSION = 2  # 2: kept

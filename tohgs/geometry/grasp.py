@@ -1,8 +1,9 @@
-"""The grasp vector and rigid poses: the one place the grasp's layout and its transforms are written.
+"""The grasp vector's rigid transforms and poses: the one place they are written.
 
-A grasp is :data:`GRASP_DIM` = 51 numbers: the hand's translation (3, m), its global rotation as an
-axis-angle (3, rad) and the 15 finger joints' axis-angles (45, rad), the MANO layout
-(:mod:`tohgs.hand`). Poses are ``[x, y, z, qx, qy, qz, qw]`` (metres, scipy's xyzw quaternion).
+A grasp is :data:`tohgs.hand.layout.GRASP_DIM` = 51 numbers (the hand layout's, its one home): the hand's
+translation (3, m), its global rotation as an axis-angle (3, rad) and the 15 finger joints' axis-angles
+(45, rad), the MANO layout (:mod:`tohgs.hand.layout`). Poses are ``[x, y, z, qx, qy, qz, qw]`` (metres,
+scipy's xyzw quaternion).
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-GRASP_DIM = 51  # translation (3) + global axis-angle (3) + 15 joints x axis-angle (3)
+from tohgs.hand.layout import GRASP_DIM
 
 
 def pose_matrix(pose: np.ndarray) -> np.ndarray:

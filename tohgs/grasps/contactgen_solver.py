@@ -41,10 +41,10 @@ from dataclasses import dataclass
 import torch
 
 from tohgs.geometry.contact_parts import N_PARTS, PartContact, part_contact
-from tohgs.geometry.grasp import GRASP_DIM
 from tohgs.geometry.hand_object import distance_to_vertices, nearest_index, vertex_normals
 from tohgs.geometry.surface_distance import closest_faces, corner_normals, distance_to_faces, vertex_rings
 from tohgs.grasps.tta import clamp_to_limits, pose_problems, problem_histories
+from tohgs.hand.layout import GRASP_DIM
 from tohgs.hand.model import HandModel
 
 CONTACTGEN_POINTS = 2048  # ContactGen's object points: the point sums are scaled to this many

@@ -22,6 +22,7 @@ import trimesh
 from tohgs.geometry.grasp import pose_matrix, transform_grasp
 from tohgs.geometry.scene import SceneCollider, collision_free, scene_meshes
 from tohgs.hand.assets import HandAssets
+from tohgs.hand.layout import GRASP_DIM
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +55,7 @@ def expand_configurations(scenes, prior_pose: np.ndarray, hand: HandAssets, obje
     if len(prior_pose) == 0:
         log.warning("%s %s: no accepted prior grasp, so no task grasp", scenes.task, scenes.object)
         return {"config": np.zeros(0, np.int32), "prior_index": np.zeros(0, np.int32),
-                "grasp_init": np.zeros((0, 51), np.float32), "grasp_goal": np.zeros((0, 51), np.float32),
+                "grasp_init": np.zeros((0, GRASP_DIM), np.float32), "grasp_goal": np.zeros((0, GRASP_DIM), np.float32),
                 "kept_per_config": np.zeros(len(scenes), np.int64),
                 "rejected_init": np.zeros(len(scenes), np.int64), "rejected_goal": np.zeros(len(scenes), np.int64)}
     local = hand.vertices(prior_pose)  # (A, V, 3) in the target's mesh frame
@@ -81,8 +82,8 @@ def expand_configurations(scenes, prior_pose: np.ndarray, hand: HandAssets, obje
         log.info("%s %s configuration %d: %d of %d grasps kept", scenes.task, scenes.object, c, len(idx), len(local))
     return {"config": np.asarray(rows["config"], dtype=np.int32),
             "prior_index": np.asarray(rows["prior_index"], dtype=np.int32),
-            "grasp_init": np.concatenate(rows["grasp_init"]).astype(np.float32) if rows["grasp_init"] else np.zeros((0, 51), np.float32),
-            "grasp_goal": np.concatenate(rows["grasp_goal"]).astype(np.float32) if rows["grasp_goal"] else np.zeros((0, 51), np.float32),
+            "grasp_init": np.concatenate(rows["grasp_init"]).astype(np.float32) if rows["grasp_init"] else np.zeros((0, GRASP_DIM), np.float32),
+            "grasp_goal": np.concatenate(rows["grasp_goal"]).astype(np.float32) if rows["grasp_goal"] else np.zeros((0, GRASP_DIM), np.float32),
             "kept_per_config": kept, "rejected_init": rejected[0], "rejected_goal": rejected[1]}
 
 

@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from tohgs.hand.layout import FINGER_POSE_DIM
+
 log = logging.getLogger(__name__)
 
 CHECKS = ("pv", "sd", "contact", "joints", "energy")
@@ -77,8 +79,8 @@ def quality_flags(pv: np.ndarray, sd: np.ndarray, contact_distance: np.ndarray, 
 def _metric_free_flags(finger_pose: np.ndarray, joint_limits: np.ndarray, e_fc: np.ndarray, e_dis: np.ndarray,
                        e_pen: np.ndarray, t: FilterThresholds) -> dict[str, np.ndarray]:
     """``{"joints", "energy"}`` flags, each (B,) bool (arguments as :func:`quality_flags`)."""
-    lim = np.asarray(joint_limits).reshape(45, 2)
-    fp = np.asarray(finger_pose).reshape(-1, 45)
+    lim = np.asarray(joint_limits).reshape(FINGER_POSE_DIM, 2)
+    fp = np.asarray(finger_pose).reshape(-1, FINGER_POSE_DIM)
     return {
         "joints": np.all((fp >= lim[:, 0] - t.joint_tolerance) & (fp <= lim[:, 1] + t.joint_tolerance), axis=1),
         "energy": (np.asarray(e_fc) < t.max_fc) & (np.asarray(e_dis) < t.max_dis) & (np.asarray(e_pen) < t.max_pen),

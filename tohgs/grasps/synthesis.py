@@ -46,7 +46,7 @@ import numpy as np
 import torch
 
 from tohgs.geometry.sdf import SDFGrid
-from tohgs.hand.layout import FINGERS, KEYPOINT_NAMES
+from tohgs.hand.layout import FINGER_POSE_DIM, FINGERS, KEYPOINT_NAMES
 from tohgs.hand.model import HandModel
 from tohgs.hand.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 
@@ -216,7 +216,7 @@ class GraspEnergy:
         e_prior = (((fingers - hand.prior_mean) / hand.prior_std) ** 2).mean(-1)
         dist = (self.pair_diff @ joints).norm(dim=-1)  # (B, P) distances of the keypoint pairs
         e_spen = torch.relu(s.spen_threshold - dist).sum(-1)
-        lim = hand.joint_limits.reshape(45, 2)
+        lim = hand.joint_limits.reshape(FINGER_POSE_DIM, 2)
         e_joint = (torch.relu(fingers - lim[:, 1]) + torch.relu(lim[:, 0] - fingers)).sum(-1)
         e_plane = torch.zeros(b, dtype=verts.dtype, device=verts.device)
         if self.plane_rows is not None and len(self.plane_rows):
@@ -307,7 +307,7 @@ def initial_grasps(hand: HandModel, vertices: np.ndarray, settings: SynthesisSet
     roll = (2 * math.pi * torch.rand(b, 1, generator=generator, dtype=dtype)) * u
     rot = axis_angle_to_matrix(roll) @ axis_angle_to_matrix(align)
     pose = hand.preset(s.init_preset, b).to(dtype)
-    pose[:, 6:] += s.init_jitter * torch.randn(b, 45, generator=generator, dtype=dtype)
+    pose[:, 6:] += s.init_jitter * torch.randn(b, FINGER_POSE_DIM, generator=generator, dtype=dtype)
     pose[:, 3:6] = matrix_to_axis_angle(rot)
     with torch.no_grad():
         rest = hand(torch.cat([torch.zeros(b, 6, dtype=dtype), pose[:, 6:]], 1)).vertices

@@ -36,6 +36,7 @@ import torch
 
 from tohgs.geometry.hand_object import (contact_of_distance, contact_values, distance_to_vertices, inside_hand,
                                        nearest_vertex, vertex_normals)
+from tohgs.hand.layout import FINGER_POSE_DIM
 from tohgs.hand.model import HandModel, HandOutput
 from tohgs.models.contact_net import ObjectCache
 
@@ -65,7 +66,7 @@ class TTASettings:
 
 def clamp_to_limits(grasp: torch.Tensor, limits: torch.Tensor) -> torch.Tensor:
     """(B, 51) grasps with the 45 finger numbers clamped to (15, 3, 2) ``[min, max]`` limits, radians."""
-    lim = limits.reshape(45, 2).to(grasp)
+    lim = limits.reshape(FINGER_POSE_DIM, 2).to(grasp)
     return torch.cat([grasp[:, :6], torch.maximum(torch.minimum(grasp[:, 6:], lim[:, 1]), lim[:, 0])], -1)
 
 

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tohgs.hand.layout import PARENTS
+from tohgs.hand.layout import FINGER_POSE_DIM, PARENTS
 from tohgs.hand.assets import HandAssets
 
 log = logging.getLogger(__name__)
@@ -212,8 +212,8 @@ def build_anny_assets() -> HandAssets:
         tip_ids=np.zeros(5, dtype=np.int64),
         contact_ids=np.zeros(0, dtype=np.int64),
         joint_limits=np.zeros((15, 3, 2)),
-        prior_mean=np.zeros(45),
-        prior_std=np.ones(45),
+        prior_mean=np.zeros(FINGER_POSE_DIM),
+        prior_std=np.ones(FINGER_POSE_DIM),
         meta={"backend": "anny", "anny_version": anny_version(), "phenotypes": list(PHENOTYPES),
               "local_changes": list(LOCAL_CHANGES), "phenotype_step": PHENOTYPE_STEP, "local_step": LOCAL_STEP},
     )

@@ -16,8 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from tohgs.geometry.grasp import GRASP_DIM
-from tohgs.hand.layout import N_BETAS, N_JOINTS, PARENTS
+from tohgs.hand.layout import FINGER_POSE_DIM, GRASP_DIM, N_BETAS, N_JOINTS, PARENTS
 
 #: Contact candidates on the palm: the last ones of ``contact_ids`` (see :mod:`tohgs.hand.derived`).
 PALM_CONTACTS = 8
@@ -87,7 +86,7 @@ class HandAssets:
         expect = {
             "rest_vertices": (v, 3), "shape_dirs": (v, 3, N_BETAS), "rest_joints": (N_JOINTS, 3),
             "joint_shape_dirs": (N_JOINTS, 3, N_BETAS), "weights": (v, N_JOINTS), "part_labels": (v,),
-            "tip_ids": (5,), "joint_limits": (15, 3, 2), "prior_mean": (45,), "prior_std": (45,),
+            "tip_ids": (5,), "joint_limits": (15, 3, 2), "prior_mean": (FINGER_POSE_DIM,), "prior_std": (FINGER_POSE_DIM,),
         }
         if self.pose_dirs is not None:
             expect["pose_dirs"] = (v, 3, 135)

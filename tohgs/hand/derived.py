@@ -20,8 +20,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from tohgs.geometry.grasp import GRASP_DIM
-from tohgs.hand.layout import FINGERS, N_JOINTS, PARENTS, TIP_ORDER, children
+from tohgs.hand.layout import FINGER_POSE_DIM, FINGERS, GRASP_DIM, N_JOINTS, PARENTS, TIP_ORDER, children
 from tohgs.hand.assets import PALM_CONTACTS, HandAssets
 
 PALM_NORMAL = np.array([0.0, -1.0, 0.0])
@@ -177,7 +176,7 @@ def complete_assets(a: HandAssets) -> HandAssets:
     a.joint_limits = canonical_limits(frames, ranges)
     a.presets = {name: preset_pose(frames, flex, PRESET_THUMB_ABDUCTION[name]) for name, flex in PRESET_FLEXION.items()}
     a.prior_mean = a.presets["relaxed"][6:].copy()
-    a.prior_std = np.maximum((a.joint_limits[..., 1] - a.joint_limits[..., 0]).reshape(45) / 4, 0.05)
+    a.prior_std = np.maximum((a.joint_limits[..., 1] - a.joint_limits[..., 0]).reshape(FINGER_POSE_DIM) / 4, 0.05)
     a.meta = {**a.meta, "anatomical_ranges_deg": np.rad2deg(ranges).round(3).tolist(),
               "joint_frames": frames.round(6).tolist()}
     a.validate(a.name)

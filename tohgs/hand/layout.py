@@ -21,6 +21,14 @@ PARENTS = (-1, 0, 1, 2, 0, 4, 5, 0, 7, 8, 0, 10, 11, 0, 13, 14)
 N_JOINTS = 16
 N_BETAS = 10
 
+#: The grasp vector's parts, in order: the translation (m), the global rotation (axis-angle, rad) and the
+#: finger pose (the 15 finger joints' axis-angles, rad: ``grasp[..., 6:]`` reshaped to (..., 15, 3)).
+TRANSLATION_DIM = 3
+GLOBAL_ROTATION_DIM = 3
+FINGER_POSE_DIM = 3 * (N_JOINTS - 1)  # 45
+#: The length of a grasp vector: 3 + 3 + 45 = 51 (its one home).
+GRASP_DIM = TRANSLATION_DIM + GLOBAL_ROTATION_DIM + FINGER_POSE_DIM
+
 #: Fingers in MANO joint order, each with its 3 joint indices.
 FINGERS = {"index": (1, 2, 3), "middle": (4, 5, 6), "pinky": (7, 8, 9), "ring": (10, 11, 12), "thumb": (13, 14, 15)}
 

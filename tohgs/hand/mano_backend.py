@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from tohgs.hand.assets import HandAssets
+from tohgs.hand.layout import FINGER_POSE_DIM
 from tohgs.safe_pickle import NUMPY_GLOBALS, restricted_loads
 
 #: Globals a MANO pickle may name (:func:`tohgs.safe_pickle.restricted_loads`' allow-list): numpy's, and
@@ -134,8 +135,8 @@ def mano_assets_from_dict(d: dict[str, Any], source: str = "MANO model") -> Hand
         name="mano", rest_vertices=v, shape_dirs=shapedirs, pose_dirs=posedirs, rest_joints=jreg @ v,
         joint_shape_dirs=np.einsum("jv,vcl->jcl", jreg, shapedirs), weights=weights, faces=faces,
         closed_faces=faces, part_labels=np.zeros(n, dtype=np.int64), tip_ids=np.zeros(5, dtype=np.int64),
-        contact_ids=np.zeros(0, dtype=np.int64), joint_limits=np.zeros((15, 3, 2)), prior_mean=np.zeros(45),
-        prior_std=np.ones(45), meta={"backend": "mano", "source": source},
+        contact_ids=np.zeros(0, dtype=np.int64), joint_limits=np.zeros((15, 3, 2)), prior_mean=np.zeros(FINGER_POSE_DIM),
+        prior_std=np.ones(FINGER_POSE_DIM), meta={"backend": "mano", "source": source},
     )
     return complete_assets(assets)
 

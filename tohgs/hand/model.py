@@ -19,10 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from tohgs.geometry.grasp import GRASP_DIM
 from tohgs.hand.assets import LEVELS as _LEVELS
 from tohgs.hand.assets import HandAssets
-from tohgs.hand.layout import N_BETAS, N_JOINTS, PARENTS
+from tohgs.hand.layout import GRASP_DIM, N_BETAS, N_JOINTS, PARENTS
 from tohgs.hand.rotations import axis_angle_to_matrix
 
 __all__ = ["HandAssets", "HandModel", "HandOutput"]

@@ -21,7 +21,8 @@ import torch
 from tohgs.data.batch import Batch
 from tohgs.data.maps import MapDataset
 from tohgs.data.predictions import read_predictions, write_predictions
-from tohgs.geometry.grasp import GRASP_DIM, transform_grasp
+from tohgs.geometry.grasp import transform_grasp
+from tohgs.hand.layout import GRASP_DIM
 from tohgs.methods import method_kind_exists, method_kinds, method_module
 from tohgs.methods.base import GeneratorSettings, Method, Request
 from tohgs.models.checkpoint import load_component, pick_device

@@ -26,6 +26,7 @@ from torch import nn
 
 from tohgs.data.batch import Batch
 from tohgs.geometry.hand_object import contact_values
+from tohgs.hand.layout import FINGER_POSE_DIM, GLOBAL_ROTATION_DIM, TRANSLATION_DIM
 from tohgs.hand.model import HandModel
 from tohgs.models.component import Component
 from tohgs.models.grasp_cvae import ENCODER_SCALE, bbox_diagonal
@@ -53,7 +54,8 @@ class ContactNetConfig:
 def perturb_grasps(grasp: torch.Tensor, noise: tuple, generator: torch.Generator) -> torch.Tensor:
     """(B, 51) grasps with Gaussian noise of standard deviations ``noise`` = (translation m, global
     rotation rad, finger numbers rad) added to the three parts (drawn from ``generator``)."""
-    sigma = torch.cat([torch.full((3,), noise[0]), torch.full((3,), noise[1]), torch.full((45,), noise[2])])
+    sigma = torch.cat([torch.full((TRANSLATION_DIM,), noise[0]), torch.full((GLOBAL_ROTATION_DIM,), noise[1]),
+                       torch.full((FINGER_POSE_DIM,), noise[2])])
     return grasp + torch.randn(grasp.shape, generator=generator).to(grasp) * sigma.to(grasp)
 
 

@@ -41,7 +41,6 @@ import torch
 from torch import nn
 
 from tohgs.data.batch import Batch
-from tohgs.geometry.grasp import GRASP_DIM
 from tohgs.geometry.rot6d import VECTOR_DIM, grasp_from_palm_rot6d, palm_rot6d
 from tohgs.hand.model import HandModel
 from tohgs.models.component import Component, seen_grasps

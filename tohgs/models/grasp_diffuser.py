@@ -75,8 +75,8 @@ from torch import nn
 
 from tohgs.data.batch import Batch
 from tohgs.geometry.frames import contact_frame_3d
-from tohgs.geometry.grasp import GRASP_DIM
 from tohgs.geometry.rot6d import grasp_from_palm_rot6d, palm_rot6d
+from tohgs.hand.layout import GRASP_DIM
 from tohgs.hand.model import HandModel
 from tohgs.hand.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from tohgs.models.component import Component, seen_grasps

@@ -54,6 +54,7 @@ import torch
 
 from tohgs.geometry.cloud import clearance_violation, cloud_signed_distance, even_subset
 from tohgs.geometry.hand_object import contact_of_distance, contact_values
+from tohgs.hand.layout import FINGER_POSE_DIM
 from tohgs.models.guidance_settings import GuidanceSettings  # noqa: F401 (re-exported: the settings live without torch)
 
 TERMS = ("scene", "object", "contact", "joints")
@@ -78,7 +79,7 @@ class GuidanceEnergy:
         self.points, self.normals, self.scene, self.scene_normals = points, normals, scene, scene_normals
         self.goal, self.contact = goal_transform, contact
         self.sub = even_subset(hand.rest_vertices.shape[0], settings.hand_points, points.device)
-        lim = hand.joint_limits.reshape(45, 2).to(points)
+        lim = hand.joint_limits.reshape(FINGER_POSE_DIM, 2).to(points)
         self.limits = lim if bool((lim[:, 1] > lim[:, 0]).any()) else None
 
     @classmethod

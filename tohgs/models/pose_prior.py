@@ -23,11 +23,10 @@ import numpy as np
 import torch
 
 from tohgs.data.batch import Batch
+from tohgs.hand.layout import FINGER_POSE_DIM
 from tohgs.models.component import Component
 from tohgs.models.layers import mlp
 from tohgs.settings import settings_from
-
-N_FINGER = 45  # the finger numbers of a grasp (15 joints x 3, axis-angle)
 
 
 @dataclass(frozen=True)
@@ -58,10 +57,10 @@ class PosePrior(Component):
     def __init__(self, cfg: PosePriorConfig):
         super().__init__()
         self.cfg = cfg
-        self.encoder = mlp([N_FINGER, *cfg.hidden, 2 * cfg.latent])
-        self.decoder = mlp([cfg.latent, *reversed(cfg.hidden), N_FINGER])
-        self.register_buffer("mean", torch.zeros(N_FINGER))
-        self.register_buffer("std", torch.ones(N_FINGER))
+        self.encoder = mlp([FINGER_POSE_DIM, *cfg.hidden, 2 * cfg.latent])
+        self.decoder = mlp([cfg.latent, *reversed(cfg.hidden), FINGER_POSE_DIM])
+        self.register_buffer("mean", torch.zeros(FINGER_POSE_DIM))
+        self.register_buffer("std", torch.ones(FINGER_POSE_DIM))
 
     def prepare(self, data, task: str, hand=None) -> None:
         """The normaliser of the training grasps' finger numbers (std floored at 1e-3); augmentation turns
@@ -71,7 +70,7 @@ class PosePrior(Component):
             raise ValueError("a pose prior needs at least one training grasp")
         fingers = torch.as_tensor(np.concatenate(stored)[:, 6:], dtype=torch.float32)
         self.mean.copy_(fingers.mean(0))
-        self.std.copy_((fingers.std(0) if len(fingers) > 1 else torch.zeros(N_FINGER)).clamp_min(1e-3))
+        self.std.copy_((fingers.std(0) if len(fingers) > 1 else torch.zeros(FINGER_POSE_DIM)).clamp_min(1e-3))
 
     def normaliser(self) -> dict[str, torch.Tensor]:
         return {"mean": self.mean.detach().cpu().clone(), "std": self.std.detach().cpu().clone()}

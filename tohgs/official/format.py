@@ -44,7 +44,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from tohgs.assets.sources import sanitise
-from tohgs.geometry.grasp import GRASP_DIM
+from tohgs.hand.layout import GRASP_DIM
 from tohgs.safe_pickle import NUMPY_GLOBALS, restricted_loads
 
 TASKS = ("placing", "shelving", "stacking")
