@@ -13,7 +13,8 @@ import trimesh
 from tohgs.assets.manifest import record_object_files
 from tohgs.data.build_maps import make_map_shard, shard_items
 from tohgs.data.maps import SCHEMA_VERSION, MapDataset, read_map_shard
-from tohgs.geometry.maps import nearest_distance, nearest_distance_brute, normalised_map, sample_surface, scene_cloud
+from tohgs.geometry.maps import (ALPHA_CONTACT, ALPHA_DISTANCE, nearest_distance, nearest_distance_brute, normalised_map,
+                                 sample_surface, scene_cloud)
 from tohgs.geometry.sampling import farthest_point_sampling, farthest_point_sampling_reference
 
 
@@ -22,6 +23,19 @@ def test_nearest_distances_match_brute_force():
     a, b = rng.normal(size=(700, 3)), rng.normal(size=(1300, 3))
     np.testing.assert_allclose(nearest_distance(a, b), nearest_distance_brute(a, b), rtol=1e-12)
     np.testing.assert_allclose(nearest_distance(b[:5], b), 0.0)
+
+
+def test_the_two_alphas_have_one_home():
+    """tohgs.geometry.maps' alphas are the library's defaults and the schema's. GuidanceSettings writes the
+    contact alpha out (the workflow's parse imports it, without numpy): pinned here."""
+    from tohgs.config import validate_config
+    from tohgs.data.build_maps import MapSettings
+    from tohgs.models.guidance_settings import GuidanceSettings
+
+    cfg = validate_config({})
+    assert (MapSettings().alpha_distance, MapSettings().alpha_contact) == (ALPHA_DISTANCE, ALPHA_CONTACT)
+    assert (cfg["maps"]["points"]["alpha_distance"], cfg["maps"]["points"]["alpha_contact"]) == (ALPHA_DISTANCE, ALPHA_CONTACT)
+    assert GuidanceSettings().alpha == cfg["prediction"]["steer"]["alpha"] == ALPHA_CONTACT
 
 
 def test_normalised_map_is_one_at_contact_and_falls_with_distance():

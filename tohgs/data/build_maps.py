@@ -29,7 +29,8 @@ import trimesh
 from tohgs.assets.mesh import object_mesh
 from tohgs.data.maps import MapShard, write_map_shard
 from tohgs.geometry.grasp import pose_matrix
-from tohgs.geometry.maps import nearest_distance, normalised_map, sample_surface, scene_cloud
+from tohgs.geometry.maps import (ALPHA_CONTACT, ALPHA_DISTANCE, nearest_distance, normalised_map, sample_surface,
+                                 scene_cloud)
 from tohgs.geometry.scene import scene_meshes
 from tohgs.hand.assets import HandAssets
 from tohgs.hand.layout import GRASP_DIM
@@ -43,8 +44,8 @@ class MapSettings:
 
     n_points: int = 512
     n_scene_points: int = 2048
-    alpha_distance: float = 30.0
-    alpha_contact: float = 100.0
+    alpha_distance: float = ALPHA_DISTANCE
+    alpha_contact: float = ALPHA_CONTACT
     max_grasps_per_config: int = 0  # 0 keeps every task grasp
     scene_radius: float = 0.25  # m around the target's two positions; 0 = the whole scene (the paper)
 

@@ -10,17 +10,26 @@
 
 Nearest neighbours come from a k-d tree (scipy's cKDTree): O((N + M) log M) instead of the N x M
 all-pairs distances of :func:`nearest_distance_brute` (kept for tests and the benchmark).
+
+:data:`ALPHA_DISTANCE` and :data:`ALPHA_CONTACT` are the two alphas' one home in the library (the config's
+``maps.alpha_distance`` and ``maps.alpha_contact`` default to the same in the schema). The networks read
+them for their defaults, so this module imports only numpy at import time (scipy and trimesh where used).
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import trimesh
-from scipy.spatial import cKDTree
 
 from tohgs.geometry.sampling import farthest_point_sampling
 
+if TYPE_CHECKING:
+    import trimesh
+
+#: The distance maps' alpha (1/m): the sharpness of ``1 - 2 (sigmoid(alpha d) - 0.5)`` for scene distances.
 ALPHA_DISTANCE = 30.0
+#: The contact maps' alpha (1/m): the same for the distance to the nearest hand vertex (sharper).
 ALPHA_CONTACT = 100.0
 
 
@@ -31,6 +40,8 @@ def normalised_map(d: np.ndarray, alpha: float) -> np.ndarray:
 
 def nearest_distance(points: np.ndarray, cloud: np.ndarray) -> np.ndarray:
     """(N,) distance from each of (N, 3) ``points`` to its nearest point of (M, 3) ``cloud``, m."""
+    from scipy.spatial import cKDTree
+
     if len(cloud) == 0:
         return np.full(len(points), np.inf)
     return cKDTree(np.asarray(cloud, dtype=np.float64)).query(np.asarray(points, dtype=np.float64), k=1)[0]
@@ -72,6 +83,8 @@ def scene_cloud(meshes: list[trimesh.Trimesh], n: int, rng: np.random.Generator,
     distance maps measure instead of the whole 1.5 m table. Samples are drawn in rounds until
     ``oversample * n`` of them fall inside (or 20 rounds pass).
     """
+    import trimesh
+
     if not meshes:
         raise ValueError("a scene needs at least one mesh")
     merged = trimesh.util.concatenate(meshes)

@@ -28,6 +28,7 @@ from torch import nn
 
 from tohgs.data.batch import Batch
 from tohgs.geometry.frames import scene_frame
+from tohgs.geometry.maps import ALPHA_DISTANCE
 from tohgs.geometry.neighbours import nearest_neighbours
 from tohgs.models.component import Component
 from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, TimeMLP, sample
@@ -202,7 +203,7 @@ class ContactDiffuser(Component):
 
     @torch.no_grad()
     def sample_contact(self, batch: Batch, sampler: str, steps: int, generator: torch.Generator,
-                       steer: GuidanceSettings | None = None, distance_alpha: float = 30.0) -> torch.Tensor:
+                       steer: GuidanceSettings | None = None, distance_alpha: float = ALPHA_DISTANCE) -> torch.Tensor:
         """(B, N) contact maps in [0, 1] for the batch's scenes (one reverse process per sample); with a
         ``steer`` whose ``contact_scale`` is positive, each guided step's x0 moves contact off the object
         points near the scene at either pose (:func:`tohgs.models.guidance.contact_guidance_step`; the distance

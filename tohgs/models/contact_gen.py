@@ -34,6 +34,7 @@ from torch.nn import functional as F
 
 from tohgs.data.batch import Batch
 from tohgs.geometry.contact_parts import N_PARTS, PartContact, part_contact
+from tohgs.geometry.maps import ALPHA_CONTACT
 from tohgs.hand.model import HandModel
 from tohgs.models.component import Component
 from tohgs.models.layers import mlp
@@ -122,7 +123,7 @@ class ContactGen(Component):
         if cfg.parts:
             self.part_stage = _Stage(f + 1, N_PARTS, N_PARTS, g, z, h)
             self.direction_stage = _Stage(f + 1 + N_PARTS, 3, 3, g, z, h)
-        self.register_buffer("alpha_contact", torch.tensor(100.0))
+        self.register_buffer("alpha_contact", torch.tensor(ALPHA_CONTACT))
         self.register_buffer("steps_seen", torch.tensor(0, dtype=torch.long))
 
     def prepare(self, data, task: str, hand: HandModel | None = None) -> None:

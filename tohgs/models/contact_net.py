@@ -26,6 +26,7 @@ from torch import nn
 
 from tohgs.data.batch import Batch
 from tohgs.geometry.hand_object import contact_values
+from tohgs.geometry.maps import ALPHA_CONTACT
 from tohgs.hand.layout import FINGER_POSE_DIM, GLOBAL_ROTATION_DIM, TRANSLATION_DIM
 from tohgs.hand.model import HandModel
 from tohgs.models.component import Component
@@ -95,7 +96,7 @@ class ContactNet(Component):
         self.point_in = nn.Linear(self.object_encoder.local_dim + 1, h0)
         self.pooled_in = nn.Linear(self.object_encoder.global_dim + self.hand_encoder.global_dim, h0, bias=False)
         self.head = nn.Sequential(nn.LayerNorm(h0), nn.GELU(), mlp([*cfg.head, 1]))
-        self.register_buffer("alpha_contact", torch.tensor(100.0))
+        self.register_buffer("alpha_contact", torch.tensor(ALPHA_CONTACT))
 
     def prepare(self, data, task: str, hand: HandModel | None = None) -> None:
         """Before training: the hand (the loss poses it) and the shards' contact alpha."""

@@ -54,6 +54,7 @@ import torch
 
 from tohgs.geometry.cloud import clearance_violation, cloud_signed_distance, even_subset
 from tohgs.geometry.hand_object import contact_of_distance, contact_values
+from tohgs.geometry.maps import ALPHA_DISTANCE
 from tohgs.hand.layout import FINGER_POSE_DIM
 from tohgs.models.guidance_settings import GuidanceSettings  # noqa: F401 (re-exported: the settings live without torch)
 
@@ -144,7 +145,7 @@ def guidance_step(decode: Callable[[torch.Tensor], torch.Tensor], energy: Callab
     return guide
 
 
-def near_scene_weights(d_init: torch.Tensor, d_goal: torch.Tensor, near: float, alpha: float = 30.0) -> torch.Tensor:
+def near_scene_weights(d_init: torch.Tensor, d_goal: torch.Tensor, near: float, alpha: float = ALPHA_DISTANCE) -> torch.Tensor:
     """(B, N) weights in [0, 1] of object points by their nearness to the scene at either pose: 0 at
     ``near`` metres or farther, 1 at the scene, linear in the distance map's value in between.
 

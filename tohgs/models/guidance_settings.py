@@ -32,7 +32,7 @@ class GuidanceSettings:
     w_joints: float = 0.0
     margin: float = 0.005
     max_depth: float = 0.05
-    alpha: float = 100.0
+    alpha: float = 100.0  # tohgs.geometry.maps.ALPHA_CONTACT (the parse imports this module: no numpy; a test pins it)
     hand_points: int = 0
     contact_scale: float = 0.0
     near: float = 0.02
