@@ -41,16 +41,14 @@ import torch
 from scipy.stats import wilcoxon
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(1, str(Path(__file__).resolve().parent.parent / "tests"))  # helpers.near_object: the tests' start hands
 from base_commit import BASE_COMMIT, base_module, short_commit  # noqa: E402
 from bench_batched import configurations, timed  # noqa: E402
-from helpers import near_object  # noqa: E402
 
 from tohgs.config import validate_config  # noqa: E402
 from tohgs.geometry.contact_parts import PartContact  # noqa: E402
 from tohgs.geometry.hand_object import inside_hand, nearest_vertex, vertex_normals  # noqa: E402
 from tohgs.grasps.contactgen_solver import SolverSettings, contact_points, representation_of  # noqa: E402
-from tohgs.grasps.flex import FlexSettings  # noqa: E402
+from tohgs.grasps.starts import near_object  # noqa: E402
 from tohgs.hand import load_hand  # noqa: E402
 from tohgs.models.component import build_component  # noqa: E402
 

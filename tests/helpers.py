@@ -60,17 +60,6 @@ def pose_prior(hand) -> PosePrior:
     return prior
 
 
-def near_object(hand, points: torch.Tensor, n: int, seed: int) -> torch.Tensor:
-    """(n, 51) relaxed hands with the palm near the object's surface, turned at random."""
-    gen = torch.Generator().manual_seed(seed)
-    g = hand.preset("relaxed", n).clone()
-    g[:, 3:6] += 0.4 * torch.randn(n, 3, generator=gen)
-    with torch.no_grad():
-        palm = hand(g).vertices[:, hand.assets.palm_ids].mean(1)
-    g[:, :3] += points[torch.randint(0, len(points), (n,), generator=gen)] - palm
-    return g
-
-
 # --- networks --------------------------------------------------------------------------------------------
 
 #: A PointNet++ small enough for tests.

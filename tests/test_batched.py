@@ -11,13 +11,14 @@ import pytest
 import torch
 import trimesh
 
-from helpers import near_object, pose_prior
+from helpers import pose_prior
 from tohgs.data.batch import Batch
 from tohgs.geometry.contact_parts import PartContact
 from tohgs.geometry.maps import sample_surface
 from tohgs.geometry.registration import ICPSettings, register, register_many
 from tohgs.grasps.contactgen_solver import SolverSettings, representation_of, solve, solve_many
 from tohgs.grasps.flex import FlexSettings, optimise, optimise_many
+from tohgs.grasps.starts import near_object
 from tohgs.grasps.tta import TTASettings, adapt, adapt_many
 from tohgs.hand import load_hand
 from tohgs.methods.base import Request

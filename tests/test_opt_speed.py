@@ -9,10 +9,10 @@ import pytest
 import torch
 import trimesh
 
-from helpers import near_object
 from tohgs.geometry.cloud import CloudIndex
 from tohgs.geometry.hand_object import contact_values, inside_hand, nearest_index, nearest_vertex, vertex_normals
 from tohgs.geometry.maps import sample_surface
+from tohgs.grasps.starts import near_object
 from tohgs.grasps.tta import OFFICIAL_POINTS, TTASettings, object_caches, tta_energy
 from tohgs.hand import load_hand
 from tohgs.models.component import build_component
