@@ -39,7 +39,7 @@ help:
 	@echo "tohgs: task-oriented human grasp synthesis as a Snakemake workflow (README.md)"
 	@echo ""
 	@echo "  make reproduce    set up .venv, then run the whole workflow on the embedded default"
-	@echo "                    (config/config.yaml): about 245 job-minutes, 2-2.5 h on 2 cores"
+	@echo "                    (config/config.yaml): about 235 job-minutes, 2-2.5 h on 2 cores"
 	@echo "  make test         set up .venv with the test tools, then pytest with the end-to-end smoke run,"
 	@echo "                    snakemake --lint and a dry run: about 25-30 min on 2 cores"
 	@echo "  make test-fast    the unit tests only (no workflow runs): about 3 min"
