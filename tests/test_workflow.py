@@ -278,6 +278,25 @@ def test_a_single_store_is_a_target(smoke_run):
     assert _dry_run_of(smoke_run, shard, "--forcerun", shard) == {"maps": 1}
 
 
+def test_a_methods_threads_are_its_prediction_jobs_threads(smoke_run, tmp_path):
+    """settings.threads of a method block is the cores its prediction jobs ask Snakemake for (the torch
+    threads they then run with), not only a validated value that the rule's threads overwrite."""
+    extra = tmp_path / "threads.yaml"
+    extra.write_text("prediction: {threads: 2}\nmethods:\n  grasptta: {settings: {threads: 1}}\n")
+    stores = ["results/predictions/placing/grasptta.zarr", "results/predictions/placing/ours.zarr"]
+    cmd = [sys.executable, "-m", "snakemake", *stores, "--forcerun", *stores, "--cores", "2", "--configfile",
+           ".test/config/config.yaml", str(extra), "-n"]
+    out = subprocess.run(cmd, cwd=smoke_run, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, (out.stdout + out.stderr)[-3000:]
+    threads = {}
+    for block in (out.stdout + out.stderr).split("\n\n"):
+        m = re.search(r"wildcards: task=placing, method=(grasptta|ours)\b", block)
+        if m and "rule predict:" in block:
+            t = re.search(r"threads: (\d+)", block)
+            threads[m.group(1)] = int(t.group(1)) if t else 1
+    assert threads == {"grasptta": 1, "ours": 2}, threads
+
+
 @contextlib.contextmanager
 def _edited(path: Path):
     """An edit of a source file for the duration of the block; restoring the content undoes the change

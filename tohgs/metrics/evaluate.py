@@ -28,6 +28,7 @@ The table-level numbers (CR, QR, TS and the QR grid) are computed from these row
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import zlib
 from dataclasses import dataclass
@@ -46,7 +47,7 @@ from tohgs.geometry.scene import SceneCollider, scene_meshes
 from tohgs.hand.assets import HandAssets
 from tohgs.hand.collision import CollisionHand, sd_hand_of
 from tohgs.metrics.quality import (DisplacementSimulator, RobustSDSettings, SDSettings, SDWorkers, hand_quality,
-                                   palm_gravity, surface_voxels)
+                                   sd_gravity, surface_voxels)
 
 log = logging.getLogger(__name__)
 
@@ -123,7 +124,8 @@ def grasp_metrics(verts_init: np.ndarray, verts_goal: np.ndarray, faces: np.ndar
     if palm_sd:
         T = pose_matrix(target_pose)
         centre = T[:3, :3] @ np.asarray(obj.vertex_mean, dtype=np.float64) + T[:3, 3]
-        g = palm_gravity(verts_init[:, palm_ids].mean(1), centre, float(np.linalg.norm(sim.settings.gravity)))
+        palm = dataclasses.replace(sim.settings, gravity_direction="away_from_palm")  # SD's own choice of gravity
+        g = sd_gravity(palm, verts_init[:, palm_ids].mean(1), centre)
         sd_vertices, sd_faces = (verts_init, faces) if sd_mesh is None else sd_mesh
         m["sd_palm"] = sim.displacements(sd_vertices, sd_faces, object_pose=target_pose, gravity=g)
     return {**m, "init_opp": occupied_fraction(verts_init, collider), "goal_opp": occupied_fraction(verts_goal, collider)}

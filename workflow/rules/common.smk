@@ -450,6 +450,12 @@ def figure_methods(wildcards):
     )
 
 
+def method_threads(wildcards):
+    """A prediction job's cores: its method's ``settings.threads`` over ``prediction.threads`` (the job's
+    torch threads: predict.py passes the cores Snakemake grants, at most these)."""
+    return job_settings(config, wildcards.method, _SCHEMA)["threads"]
+
+
 def method_block(wildcards):
     """The method's config block as its predictions depend on it: without its label (the tables' concern)."""
     return _canonical(

@@ -46,7 +46,7 @@ rule predict:
     priority: PRIORITY["predict"]
     conda:
         "../envs/tohgs.yaml"
-    threads: config["prediction"]["threads"]
+    threads: method_threads
     resources:
         **rule_resources("predict"),
     params:
