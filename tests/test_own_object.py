@@ -54,12 +54,12 @@ def test_a_new_mesh_gets_grasps_exports_metrics_and_a_page(smoke_run, tmp_path, 
     from tohgs.export import grasp_vectors
     from tohgs.hand import HandAssets
 
-    monkeypatch.chdir(smoke_run)  # the run's cache_dir is relative to it
+    monkeypatch.chdir(tmp_path)  # elsewhere: the run's relative cache_dir is taken in the run's folder
     results = smoke_run / "results"
     # in millimetres: the objects stage rescales it into the run's size range and the summary says by what
     mesh = _capsule(tmp_path / "my cup.stl", scale=1000.0)
     out = tmp_path / "grasps"
-    summary = grasp_own_object(mesh, "placing", out, results, [SMOKE], n=4, configs=2,
+    summary = grasp_own_object(mesh, "placing", out, results, [smoke_run / SMOKE], n=4, configs=2,
                                formats=("obj", "ply", "glb", "npz"))
     assert summary["object"] == "dir-my-cup" and summary["configurations"] == 2
     assert summary["scale"] < 0.01 and 0.05 < max(summary["extents_m"]) < 0.3  # mm -> m, by the size range
@@ -97,7 +97,7 @@ def test_a_new_mesh_gets_grasps_exports_metrics_and_a_page(smoke_run, tmp_path, 
     from tohgs.scene_file import SceneFileError
 
     again = tmp_path / "again"
-    grasp_own_object(mesh, "placing", again, results, [SMOKE], n=2, formats=(), viewer=False,
+    grasp_own_object(mesh, "placing", again, results, [smoke_run / SMOKE], n=2, formats=(), viewer=False,
                      scene=out / "scene.yaml")
     first, second = (read_scenes(d / "scenes" / "placing" / "dir-my-cup.zarr") for d in (out, again))
     assert len(second) == 2 and np.abs(first.target_goal_pose - second.target_goal_pose).max() < 1e-5
@@ -109,12 +109,14 @@ def test_a_new_mesh_gets_grasps_exports_metrics_and_a_page(smoke_run, tmp_path, 
     (tmp_path / "bad.yaml").write_text(yaml.safe_dump(doc))
     with pytest.raises(SceneFileError, match=r"configurations\[1\]: at the initial pose the target reaches .* mm into "
                                              r"obstacle 0"):
-        grasp_own_object(mesh, "placing", tmp_path / "bad", results, [SMOKE], scene=tmp_path / "bad.yaml")
+        grasp_own_object(mesh, "placing", tmp_path / "bad", results, [smoke_run / SMOKE],
+                         scene=tmp_path / "bad.yaml")
     assert not (tmp_path / "bad").exists()
     # the same object again into the same folder: refused, the first result intact
     with pytest.raises(OwnObjectError, match="output folder exists"):
-        grasp_own_object(mesh, "placing", out, results, [SMOKE])
+        grasp_own_object(mesh, "placing", out, results, [smoke_run / SMOKE])
     assert (out / "summary.json").is_file()
+    assert not (tmp_path / "results").exists()  # no cache beside the working directory: the run's served
 
 
 @pytest.mark.slow

@@ -93,7 +93,8 @@ def grasp_own_object(mesh: str | Path, task: str, out: str | Path, results: str 
             ``objects.size``; the summary gives the scale).
         task: ``placing``, ``stacking`` or ``shelving``.
         out: the output folder (must not exist).
-        results: the finished run's ``results/`` folder (its models, objects, supports and hand).
+        results: the finished run's ``results/`` folder (its models, objects, supports and hand); a relative
+            ``cache_dir`` of the config is taken in the folder above it, the run's, so its caches serve.
         configfiles: the run's config files, in order (none: the embedded default); their settings are used
             throughout (objects, scenes, maps, prediction, evaluation).
         method: a method of the run's config whose models the run has (default ``ours``).
@@ -136,6 +137,8 @@ def grasp_own_object(mesh: str | Path, task: str, out: str | Path, results: str 
             raise OwnObjectError(f"{need}: missing; {results} is not a finished run's results folder "
                                  f"(make reproduce makes one; --results names another)")
     cfg = load_configs(list(configfiles))
+    cache = Path(cfg["cache_dir"])  # relative to the run's folder, as the workflow's: the run's caches serve
+    cfg["cache_dir"] = str(cache if cache.is_absolute() else results.resolve().parent / cache)
     if seed is not None:  # one seed for the object's scale, its scenes, maps and the sampling
         cfg["seed"] = cfg["prediction"]["seed"] = seed
     chain = _models_of(results, task, method, cfg)
