@@ -16,19 +16,18 @@ if str(REPO) not in sys.path:
 
 def evaluate_as_job(cfg: dict[str, Any], results: str | Path, task: str, method: str) -> pd.DataFrame:
     """The metric rows of ``results/predictions/<task>/<method>.zarr`` with the config's SD protocol
-    (``metrics.sd`` with ``evaluation.sd_gravity``'s direction and vector, as ``workflow/rules/common.smk``'s
-    ``evaluation_sd_settings`` passes it: :func:`tohgs.config.evaluation_sd_settings`), voxel pitch, PV mesh, SD hand and cache (relative to the run's folder)
-    of ``cfg``, a validated config (:func:`tohgs.config.load_config`)."""
-    from tohgs.config import evaluation_sd_settings
+    (:func:`tohgs.config.evaluation_sd_settings`, as the workflow passes it), voxel pitch, PV mesh, SD hand and
+    cache (:func:`tohgs.config.run_cache_dir`: relative to the run's folder) of ``cfg``, a validated config
+    (:func:`tohgs.config.load_configs`)."""
+    from tohgs.config import evaluation_sd_settings, run_cache_dir
     from tohgs.hand import HandAssets
     from tohgs.metrics.evaluate import evaluate_predictions
 
     results = Path(results)
     sd = evaluation_sd_settings(cfg)
-    cache = Path(cfg["cache_dir"])
     return evaluate_predictions(results / "predictions" / task / f"{method}.zarr",
                                 sorted((results / "scenes" / task).glob("*.zarr")), results / "objects",
                                 results / "objects" / "supports" / "supports.json",
                                 HandAssets.load(results / "hand" / "hand.npz"), sd, cfg["metrics"]["voxel_pitch"],
-                                cache if cache.is_absolute() else results.parent / cache,
+                                run_cache_dir(cfg, results.parent),
                                 sd_hand=cfg["evaluation"]["sd_hand"], pv_mesh=cfg["evaluation"]["pv_mesh"])

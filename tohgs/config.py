@@ -282,6 +282,13 @@ def evaluation_sd_settings(cfg: Mapping[str, Any]) -> dict[str, Any]:
     return {**copy.deepcopy(dict(cfg["metrics"]["sd"])), "gravity_direction": g["direction"], "gravity": g["vector"]}
 
 
+def run_cache_dir(cfg: Mapping[str, Any], run_dir: str | Path) -> Path:
+    """A validated config's ``cache_dir`` for a run in ``run_dir``: a relative one is taken in the run's folder,
+    as the workflow takes it in its working directory."""
+    cache = Path(cfg["cache_dir"])
+    return cache if cache.is_absolute() else Path(run_dir) / cache
+
+
 def job_settings(cfg: Mapping[str, Any], name: str, schema: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The prediction settings a job of method ``name`` (a validated config's) is given: the ``prediction``
     block overlaid with the method's ``settings`` (sub-blocks key by key), only those its kind reads

@@ -45,14 +45,9 @@ class OwnObjectError(ValueError):
 
 
 def _object_name(mesh: Path, taken: set[str]) -> str:
-    from tohgs.assets.sources import sanitise
+    from tohgs.assets.sources import dir_object_name
 
-    try:
-        name = f"dir-{sanitise(mesh.stem)}"
-    except ValueError:
-        import zlib
-
-        name = f"dir-u{zlib.crc32(mesh.stem.encode('utf-8')):08x}"
+    name = dir_object_name(mesh.stem)  # as the objects stage names a user folder's mesh
     if name in taken:
         raise OwnObjectError(f"{mesh}: the run already has an object named {name!r} (its objects.sources.dir); "
                              "rename the file")
@@ -112,7 +107,7 @@ def grasp_own_object(mesh: str | Path, task: str, out: str | Path, results: str 
         tohgs.scene_file.SceneFileError: a scene file that cannot be used (bodies that reach into each
             other among its reasons), naming the file and the configuration.
     """
-    from tohgs.config import load_configs
+    from tohgs.config import load_configs, run_cache_dir
     from tohgs.io import atomic_dir, write_json
 
     t_start = time.perf_counter()
@@ -137,8 +132,7 @@ def grasp_own_object(mesh: str | Path, task: str, out: str | Path, results: str 
             raise OwnObjectError(f"{need}: missing; {results} is not a finished run's results folder "
                                  f"(make reproduce makes one; --results names another)")
     cfg = load_configs(list(configfiles))
-    cache = Path(cfg["cache_dir"])  # relative to the run's folder, as the workflow's: the run's caches serve
-    cfg["cache_dir"] = str(cache if cache.is_absolute() else results.resolve().parent / cache)
+    cfg["cache_dir"] = str(run_cache_dir(cfg, results.resolve().parent))  # the run's caches serve
     if seed is not None:  # one seed for the object's scale, its scenes, maps and the sampling
         cfg["seed"] = cfg["prediction"]["seed"] = seed
     chain = _models_of(results, task, method, cfg)

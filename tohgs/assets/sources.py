@@ -205,6 +205,15 @@ def _not_a_file(f: Path) -> str | None:
     return f"{kind}, not a mesh file"
 
 
+def dir_object_name(stem: str) -> str:
+    """The object name of a user mesh's file stem: ``dir-<sanitised stem>``, or where the stem has no letter or
+    digit of the name alphabet, ``dir-u<CRC-32 of the stem>``."""
+    try:
+        return f"dir-{sanitise(stem)}"
+    except ValueError:
+        return f"dir-u{zlib.crc32(stem.encode('utf-8')):08x}"
+
+
 def dir_candidates(folder: str | Path, skipped: list[tuple[str, str]] | None = None) -> list[ObjectSpec]:
     """Every mesh file (.obj/.stl/.ply) directly in ``folder``, sorted; a name taken by an earlier file gets
     the suffix (``cup.obj``, ``cup.stl``: ``dir-cup``, ``dir-cup-stl``).
@@ -237,10 +246,7 @@ def dir_candidates(folder: str | Path, skipped: list[tuple[str, str]] | None = N
             if skipped is not None:
                 skipped.append((ascii(str(f)) if unsafe_path(str(f)) else str(f), why))
             continue
-        try:
-            name = f"dir-{sanitise(f.stem)}"
-        except ValueError:
-            name = f"dir-u{zlib.crc32(f.stem.encode('utf-8')):08x}"
+        name = dir_object_name(f.stem)
         if name in owner:
             name = f"{name}-{f.suffix.lower().lstrip('.')}"
         if name in owner:
