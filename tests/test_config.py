@@ -127,53 +127,105 @@ def test_a_config_adds_methods_and_tables_to_the_built_in_ones_and_fills_their_d
                                                                   "clip_grad": 0.0}  # the built-in entry
 
 
-def test_the_settings_dataclasses_default_to_the_schema():
-    """One source of truth: a library default that differs from the schema's is a test failure."""
-    import dataclasses
+#: The settings dataclasses that are no kind's (a kind's are found through its module: its ``Settings``, its
+#: ``Config`` and their blocks), by the config block they mirror.
+SETTINGS_BLOCKS = {
+    "tohgs.models.train.TrainSettings": ("training",),
+    "tohgs.metrics.bootstrap.BootstrapSettings": ("evaluation", "bootstrap"),
+    "tohgs.metrics.quality_thresholds.QualityThresholds": ("evaluation", "qr"),
+    "tohgs.assets.mesh.MeshLimits": ("objects", "limits"),
+    "tohgs.assets.decomposition.DecompositionSettings": ("objects", "decomposition"),
+    "tohgs.sim.world.PhysicsSettings": ("scenes", "physics"),
+    "tohgs.grasps.prior.SDFSettings": ("prior_grasps", "sdf"),
+    "tohgs.metrics.quality.SDSettings": ("metrics", "sd"),
+    "tohgs.data.build_maps.MapSettings": ("maps", "points"),
+    "tohgs.grasps.expand.ExpansionSettings": ("task_grasps",),
+    "tohgs.geometry.registration.ICPSettings": ("prediction", "filter", "icp"),
+}
+#: Settings dataclasses that mirror no config block as they stand, and why.
+NOT_CONFIG_BLOCKS = {
+    "tohgs.metrics.quality.RobustSDSettings": "evaluation.robust_sd is off for a method it does not list; the "
+                                             "library's default, 0 perturbations, is that off",
+    "tohgs.grasps.synthesis.SynthesisSettings": "the library's default is DexGraspNet's synthesis, no support "
+                                                "planes (plane_fraction 0); the workflow's planes are set per "
+                                                "object source (prior_grasps.plane_direction)",
+    "tohgs.grasps.filter.FilterThresholds": "the library's defaults are DexGraspNet's thresholds (config/paper.yaml); "
+                                            "the workflow's default relaxes max_fc, max_dis and max_pen (the schema "
+                                            "says why)",
+    "tohgs.models.diffusion.DiffusionConfig": "read from a network's diffusion mapping, which each diffuser's "
+                                              "Config holds whole as its default (compared there)",
+    "tohgs.models.pointnet2.PointNet2Config": "built from a network's pointnet mapping with the channels the model "
+                                              "sets; each network's Config holds the mapping (compared there)",
+}
 
-    from tohgs.methods.base import SamplingSettings
-    from tohgs.methods.contact_grasp import ContactGraspSettings
-    from tohgs.methods.grasp_tta import GraspTTASettings
-    from tohgs.models.contact_diffuser import ContactDiffuserConfig
-    from tohgs.models.grasp_diffuser import GraspDiffuserConfig
-    from tohgs.geometry.registration import ICPSettings
-    from tohgs.grasps.tta import TTASettings
-    from tohgs.methods.filtered import FilterSettings
-    from tohgs.models.contact_net import ContactNetConfig
-    from tohgs.models.grasp_cvae import GraspCVAEConfig
-    from tohgs.models.contact_gen import ContactGenConfig
-    from tohgs.grasps.contactgen_solver import SolverSettings
-    from tohgs.grasps.flex import FlexSettings
-    from tohgs.metrics.bootstrap import BootstrapSettings
-    from tohgs.models.pose_prior import PosePriorConfig
-    from tohgs.models.train import TrainSettings
-    from tohgs.assets.mesh import MeshLimits
+
+def _settings_dataclasses() -> set[str]:
+    """Every settings dataclass of the library (a public class named ``*Settings``, ``*Config``, ``*Limits`` or
+    ``*Thresholds``), by dotted name, every module imported."""
+    import dataclasses
+    import importlib
+    import inspect
+    import pkgutil
+
+    import tohgs
+
+    found = set()
+    for info in pkgutil.walk_packages(tohgs.__path__, "tohgs."):
+        if info.name.endswith("__main__"):
+            continue
+        module = importlib.import_module(info.name)
+        for name, obj in inspect.getmembers(module, inspect.isclass):
+            if (obj.__module__ == info.name and dataclasses.is_dataclass(obj) and not name.startswith("_")
+                    and name.endswith(("Settings", "Config", "Limits", "Thresholds"))):
+                found.add(f"{info.name}.{name}")
+    return found
+
+
+def test_the_settings_dataclasses_default_to_the_schema():
+    """One source of truth: a library default that differs from the schema's is a test failure. Every
+    settings dataclass is compared: each kind's (its ``Settings`` or ``Config`` and their blocks, found
+    through the kinds), the others by the block they mirror; a new one that is neither fails."""
+    import dataclasses
+    import importlib
+
+    from tohgs.config import _fill_defaults
+    from tohgs.methods import method_kinds
+    from tohgs.methods.predict import method_class
+    from tohgs.models import component_kinds
+    from tohgs.models.component import component_class
 
     cfg = validate_config({})
     schema = load_schema()
-    networks = {}
-    for kind in ("contact_diffuser", "grasp_diffuser", "grasp_cvae", "contact_net", "contact_gen", "pose_prior"):
-        networks[kind] = {}
-        from tohgs.config import _fill_defaults
+    compared: set[str] = set()
+    norm = (lambda v: [norm(x) for x in v] if isinstance(v, (list, tuple)) else v)  # noqa: E731
 
-        _fill_defaults(networks[kind], schema["$defs"]["networks"][kind])
-    pred = cfg["prediction"]
-    pairs = [(TrainSettings, cfg["training"]), (SamplingSettings, pred), (ContactGraspSettings, pred), (GraspTTASettings, pred), (TTASettings, pred["tta"]),
-             (FilterSettings, pred["filter"]), (ICPSettings, pred["filter"]["icp"]),
-             (ContactDiffuserConfig, networks["contact_diffuser"]), (GraspDiffuserConfig, networks["grasp_diffuser"]),
-             (GraspCVAEConfig, networks["grasp_cvae"]), (ContactNetConfig, networks["contact_net"]),
-             (ContactGenConfig, networks["contact_gen"]), (SolverSettings, pred["contactgen"]),
-             (FlexSettings, pred["flex"]), (PosePriorConfig, networks["pose_prior"]),
-             (BootstrapSettings, cfg["evaluation"]["bootstrap"]), (MeshLimits, cfg["objects"]["limits"])]
-    for cls, block in pairs:
+    def compare(cls: type, block: dict) -> None:
+        compared.update(f"{c.__module__}.{c.__qualname__}" for c in cls.__mro__ if dataclasses.is_dataclass(c))
         for f in dataclasses.fields(cls):
             value = getattr(cls(), f.name)
             assert f.name in block, f"{cls.__name__}.{f.name} is not in the schema"
-            if isinstance(block[f.name], dict) and (value in ({}, None) or dataclasses.is_dataclass(value)):
-                continue  # a sub-block: its own dataclass is compared in its own pair
-            expect = block[f.name]
-            norm = (lambda v: [norm(x) for x in v] if isinstance(v, (list, tuple)) else v)  # noqa: E731
-            assert norm(value) == norm(expect), f"{cls.__name__}.{f.name}: {value!r} != schema {expect!r}"
+            sub = f.metadata.get("block") or (type(value) if dataclasses.is_dataclass(value) else None)
+            if sub is not None:  # a block: its own dataclass
+                compare(sub, block[f.name])
+            elif isinstance(block[f.name], dict) and value in ({}, None):
+                continue  # a plain mapping compared by the dataclass that reads it
+            else:
+                assert norm(value) == norm(block[f.name]), f"{cls.__name__}.{f.name}: {value!r} != schema {block[f.name]!r}"
+
+    for kind in method_kinds():
+        compare(method_class(kind).Settings, cfg["prediction"])
+    for kind in component_kinds():
+        network: dict = {}
+        _fill_defaults(network, schema["$defs"]["networks"][kind])
+        compare(component_class(kind).Config, network)
+    for dotted, path in SETTINGS_BLOCKS.items():
+        module, name = dotted.rsplit(".", 1)
+        block = cfg
+        for key in path:
+            block = block[key]
+        compare(getattr(importlib.import_module(module), name), block)
+    missing = _settings_dataclasses() - compared - set(NOT_CONFIG_BLOCKS)
+    assert not missing, f"settings dataclasses compared with no config block: {sorted(missing)}"
 
 
 def test_every_network_key_has_description_and_default():

@@ -28,7 +28,8 @@ import pandas as pd
 import pytest
 import yaml
 from workflow_tools import copy_workflow, job_stats, workflow_env
-from tohgs.models import CHECKED_KINDS
+from tohgs.methods import of_chain
+from tohgs.models import component_checks
 
 REPO = Path(__file__).resolve().parent.parent
 PAPER = "config/paper.yaml"
@@ -95,15 +96,8 @@ def _components_of(method: dict, components: dict) -> list[str]:
 
 
 def _with_bases(names: list[str], methods: dict) -> list[str]:
-    """The methods with those they filter (``of``), each once."""
-    out: list[str] = []
-    for m in names:
-        while True:
-            out.append(m)
-            if "of" not in methods[m]:
-                break
-            m = methods[m]["of"]
-    return list(dict.fromkeys(out))
+    """The methods with those whose predictions they read (F-GraspTTA's ``of``), each once."""
+    return list(dict.fromkeys(b for m in names for b in of_chain(m, methods)))
 
 
 def _expected(cfg: dict) -> dict[str, dict[str, int]]:
@@ -126,7 +120,7 @@ def _expected(cfg: dict) -> dict[str, dict[str, int]]:
 
     n_train = len(comps(first_seed)) + (seeds - 1) * len(comps(replicated))
     n_predict = len(first_seed) + (seeds - 1) * len(replicated)
-    checked = {c for c in comps(first_seed) if components[c]["kind"] in CHECKED_KINDS}
+    checked = {c for c in comps(first_seed) if components[c]["kind"] in component_checks()}
     every_time = {  # the jobs known before the checkpoint, in both dry runs (nothing exists yet)
         "hand_model": 1, "supports": 1, "hand_figure": 1, "objects_figure": 1, "prior_figure": 1,
         "prior_summary": 1, "scenes_figure": len(tasks), "dataset_summary": 1, "maps_figure": 1,

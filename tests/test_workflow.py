@@ -314,18 +314,72 @@ def _n_scenes(smoke_run) -> int:
     return len(list((smoke_run / "results/scenes").glob("*/*.zarr")))
 
 
-N_MAPS = 6  # 3 tasks x (1 train + 1 test) shards in the smoke config (no validation shards)
-# The smoke config's 9 components (contact_diffuser, grasp_diffuser, scene_diffuser, grasp_cvae,
-# m_grasp_cvae, contact_net, contact_gen, contact_cvae, pose_prior) and 12 methods (dataset, grasptta,
-# f-grasptta, contactgen, contactgen-gt, scenediffuser, flex, ours, m-grasptta-oc, m-grasptta-ta, m-grasptta-gt,
-# cc-gd), per task; a check per task; 5 tables (table1, table2, table4, table5, table_contactgen_gate), each with a
-# row of every task; the first 4 have a row from ContactDiffuser or GraspDiffuser (ours), the gate none.
-N_COMPONENTS, N_METHODS, N_TABLES, N_TABLES_OF_OURS = 9, 12, 5, 4
-MODELS = {"train": 3 * N_COMPONENTS, "predict": 3 * N_METHODS, "model_checks": 3}
+SMOKE = _smoke_config(REPO)  # the job counts below follow from it
+N_TASKS = len(SMOKE["scenes"]["tasks"])
+
+
+def _used_methods(cfg: dict) -> list[str]:
+    """The methods a run predicts: the tables' rows and the figures' methods, with those whose predictions
+    they read (the workflow's used_methods)."""
+    from tohgs.methods import of_chain
+
+    figures = cfg["figures"]
+    names = [m for t in cfg["tables"].values() for m in t["rows"]] + figures["contact_methods"] + figures["methods"]
+    names += [m for ms in figures["comparisons"].values() for m in ms]
+    return list(dict.fromkeys(b for m in names for b in reversed(of_chain(m, cfg["methods"]))))
+
+
+def _components_of(method: str) -> list[str]:
+    from tohgs.methods import method_components
+
+    return method_components(SMOKE["methods"][method], SMOKE["components"])
+
+
+def _methods_using(component: str) -> set[str]:
+    """The used methods that sample from ``component``, directly or through the method they read."""
+    from tohgs.methods import of_chain
+
+    return {m for m in USED if any(component in _components_of(b) for b in of_chain(m, SMOKE["methods"]))}
+
+
+def _methods_reading(setting: str) -> set[str]:
+    """The used methods whose kind reads prediction setting ``setting``, or that read such a method's predictions."""
+    from tohgs.config import method_setting_keys
+    from tohgs.methods import of_chain
+
+    meths = SMOKE["methods"]
+    return {m for m in USED if any(setting in method_setting_keys(meths[b]["kind"]) for b in of_chain(m, meths))}
+
+
+def _tables_with(methods: set[str]) -> int:
+    """How many tables have a row of ``methods``."""
+    return sum(any(m in methods for m in t["rows"]) for t in SMOKE["tables"].values())
+
+
+USED = _used_methods(SMOKE)
+N_MAPS = N_TASKS * sum(SMOKE["maps"]["shards"].values())  # every task's shards of each split
+N_COMPONENTS = len({c for m in USED for c in _components_of(m)})  # the used methods' components
+N_METHODS, N_TABLES = len(USED), len(SMOKE["tables"])
+OURS = _methods_using("contact_diffuser") | _methods_using("grasp_diffuser")
+N_TABLES_OF_OURS = _tables_with(OURS)  # the tables with a row read from ContactDiffuser or GraspDiffuser
+MODELS = {"train": N_TASKS * N_COMPONENTS, "predict": N_TASKS * N_METHODS, "model_checks": N_TASKS}
 # The evaluation of every task's predictions (and the viewer's static export of each task, rule viewer, which
 # draws every table row's predictions with their metrics).
 EVALUATION = {"evaluate": 3 * N_METHODS, "table": N_TABLES, "claims": 1, "predictions_figure": 3, "contact_maps_figure": 1,
               "viewer": 3}
+
+
+def _stale_predictions(methods: set[str]) -> dict[str, int]:
+    """The jobs after the predictions of ``methods`` changed, in every task: their predictions and evaluations,
+    the tables with a row of them, the figures and the viewer where they show one."""
+    figures = SMOKE["figures"]
+    out = {"predict": N_TASKS * len(methods), "evaluate": N_TASKS * len(methods), "table": _tables_with(methods),
+           "claims": 1, "viewer": N_TASKS}
+    if methods & set(figures["methods"]):
+        out["predictions_figure"] = N_TASKS
+    if methods & set(figures["contact_methods"]):
+        out["contact_maps_figure"] = 1
+    return out
 
 
 def _evaluated(methods_per_task: int, tasks: int = 3, tables: int = N_TABLES_OF_OURS) -> dict[str, int]:
@@ -467,20 +521,20 @@ def test_changing_a_setting_makes_only_its_jobs_stale(smoke_run):
     # m-grasptta-ta; not m-grasptta-gt, which reads the ground-truth maps).
     contact = dict(cfg["components"]["contact_diffuser"]["network"], d_model=24)
     assert stale_with(("components.contact_diffuser.network", contact)) == {
-        "all": 1, "train": 3, "predict": 6, "model_checks": 3, **_evaluated(2)}
+        "all": 1, "train": 3, "model_checks": 3, **_stale_predictions(_methods_using("contact_diffuser"))}
     # A sampling setting: the predictions of the methods that sample with it (not the dataset row's draw,
     # nor ContactGen's CVAE; the grasp_tta kind takes the sampling settings for any generator it is given).
-    assert stale_with(("prediction", dict(cfg["prediction"], steps=4))) == {"all": 1, "predict": 24, **_evaluated(8)}
+    assert stale_with(("prediction", dict(cfg["prediction"], steps=4))) == {
+        "all": 1, **_stale_predictions(_methods_reading("steps"))}
     # A test-time adaptation setting: the grasp_tta kind's methods only (4 of them, and the filter of
     # GraspTTA's predictions), not ours (nor the contact-maps figure, which shows ours).
     tta = dict(cfg["prediction"]["tta"], steps=cfg["prediction"]["tta"]["steps"] + 1)
     assert stale_with(("prediction", dict(cfg["prediction"], tta=tta))) == {
-        "all": 1, "predict": 15, "evaluate": 15, "table": 3, "claims": 1, "predictions_figure": 3,
-        "viewer": 3}  # not table5
+        "all": 1, **_stale_predictions(_methods_reading("tta"))}  # not table5
     # A training setting: that component's trainings, their predictions, their evaluation and the tables.
     grasp = dict(cfg["components"]["grasp_diffuser"]["training"], steps=cfg["components"]["grasp_diffuser"]["training"]["steps"] + 1)
-    assert stale_with(("components.grasp_diffuser.training", grasp)) == {"all": 1, "train": 3, "predict": 6,
-                                                                         "model_checks": 3, **_evaluated(2)}  # ours, cc-gd
+    assert stale_with(("components.grasp_diffuser.training", grasp)) == {
+        "all": 1, "train": 3, "model_checks": 3, **_stale_predictions(_methods_using("grasp_diffuser"))}  # ours, cc-gd
     # A QR threshold or the table's rows: the tables (and the viewer's verdicts and methods) only; a label: the
     # tables and what names the method.
     assert stale_with(("evaluation.qr", {"max_pv": 2.0e-06, "max_sd": 0.02})) == {"all": 1, "table": N_TABLES, "claims": 1,

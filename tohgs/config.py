@@ -19,12 +19,13 @@ from typing import Any
 import jsonschema
 import yaml
 
-from tohgs.methods import NOT_COMPONENT_KEYS, SAMPLING_KEYS, method_components, method_kind_exists, of_chain
+from tohgs.kinds import SCHEMA_PATH
+from tohgs.methods import (NOT_COMPONENT_KEYS, SAMPLING_KEYS, kind_declarations, method_components,
+                           method_kind_exists, method_keys, of_chain)
 from tohgs.models import component_kind_exists
 from tohgs.settings import merge
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-SCHEMA_PATH = REPO_ROOT / "workflow" / "schemas" / "config.schema.yaml"
 
 
 class ConfigError(ValueError):
@@ -46,10 +47,14 @@ REPLICA_SUFFIX = re.compile(r"-seed[0-9]+$")
 
 
 def load_schema(path: Path | str = SCHEMA_PATH) -> dict[str, Any]:
-    """Read the YAML JSON-schema of the workflow configuration, with the method kinds' settings blocks in the
-    ``prediction`` block (:func:`with_method_blocks`)."""
+    """Read the YAML JSON-schema of the workflow configuration, with the registered method kinds' blocks
+    (:func:`tohgs.methods.register_method_kind`) under ``$defs.method_kinds`` and every kind's settings
+    blocks in the ``prediction`` block (:func:`with_method_blocks`)."""
     with open(path) as fh:
-        return with_method_blocks(yaml.safe_load(fh))
+        schema = yaml.safe_load(fh)
+    kinds = schema.setdefault("$defs", {}).setdefault("method_kinds", {})
+    kinds.update({k: v for k, v in kind_declarations().items() if k not in kinds})
+    return with_method_blocks(schema)
 
 
 def with_method_blocks(schema: dict[str, Any]) -> dict[str, Any]:
@@ -70,6 +75,9 @@ def with_method_blocks(schema: dict[str, Any]) -> dict[str, Any]:
                 raise ConfigError(f"schema $defs.method_kinds.{kind}.blocks.{name}: prediction.{name} is already {other}")
             props[name], owner[name] = block, kind
     for kind, spec in schema.get("$defs", {}).get("method_kinds", {}).items():
+        if len(method_keys(spec, "method")) > 1:
+            raise ConfigError(f"schema $defs.method_kinds.{kind}.keys: {', '.join(method_keys(spec, 'method'))} all "
+                              "name a method; a kind reads the predictions of one method at most")
         unknown = [k for k in spec.get("settings", []) if k not in props or k in SAMPLING_KEYS]
         if unknown:
             raise ConfigError(f"schema $defs.method_kinds.{kind}.settings: {unknown[0]!r} is not a prediction setting of "
@@ -292,10 +300,22 @@ def run_cache_dir(cfg: Mapping[str, Any], run_dir: str | Path) -> Path:
 def job_settings(cfg: Mapping[str, Any], name: str, schema: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The prediction settings a job of method ``name`` (a validated config's) is given: the ``prediction``
     block overlaid with the method's ``settings`` (sub-blocks key by key), only those its kind reads
-    (:func:`method_setting_keys`), every one of them."""
+    (:func:`method_setting_keys`), every one of them but an optional block at its defaults (the schema's
+    ``x-optional``: guided sampling's ``steer`` while it is off, so that the jobs' settings are those of
+    before it existed)."""
+    schema = load_schema() if schema is None else schema
     method = cfg["methods"][name]
     settings = merge(copy.deepcopy(dict(cfg["prediction"])), method["settings"])
-    return {k: settings[k] for k in method_setting_keys(method["kind"], schema)}
+    props = schema["properties"]["prediction"]["properties"]
+    out = {}
+    for k in method_setting_keys(method["kind"], schema):
+        if props[k].get("x-optional"):
+            default: dict[str, Any] = {}
+            _fill_defaults(default, props[k])
+            if settings[k] == default:
+                continue
+        out[k] = settings[k]
+    return out
 
 
 def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -> None:
@@ -354,11 +374,12 @@ def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -
         if extra:
             raise ConfigError(f"config key '{where}.{sorted(extra)[0]}': not a key of a {kind} method "
                               f"(its keys: label, kind, settings{''.join(', ' + k for k in keys)})")
-    for name in cfg["methods"]:  # a method of a method of ... itself cannot be predicted
+    for name, method in cfg["methods"].items():  # a method of a method of ... itself cannot be predicted
         try:
-            of_chain(name, cfg["methods"])
+            of_chain(name, cfg["methods"], method_kinds)
         except ValueError as err:
-            raise ConfigError(f"config key 'methods.{name}.of': {err}") from None
+            key = method_keys(method_kinds[method["kind"]], "method")[0]
+            raise ConfigError(f"config key 'methods.{name}.{key}': {err}") from None
     if "claims" in cfg["tables"]:
         raise ConfigError("config key 'tables.claims': the name is the claims table's (results/tables/claims.csv); "
                           "name the table otherwise")
@@ -523,13 +544,15 @@ def replica_name(name: str, seeds: list[int], seed: int) -> str:
     return name if seed == seeds[0] else f"{name}-seed{seed}"
 
 
-def add_seed_replicas(cfg: dict[str, Any], methods: list[str] | None = None) -> dict[str, list[str]]:
+def add_seed_replicas(cfg: dict[str, Any], methods: list[str] | None = None,
+                      kinds: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, list[str]]:
     """Add, in place, the replicas of the config's ``seeds`` (a validated config): for every seed but the
     first, a copy of each of ``methods`` (default: all) and of the components and methods they build on,
     named by :func:`replica_name`, whose training seed is ``training.seed + s`` (the component's own
     overlay's, if it sets one) and whose prediction seed is ``prediction.seed + s``; a replica's
     component and method references name the same seed's replicas. The first seed's blocks get the same
-    offsets, and are left untouched when it is 0 (so one seed ``[0]`` is the config as written).
+    offsets, and are left untouched when it is 0 (so one seed ``[0]`` is the config as written). ``kinds``:
+    the method kinds' schema blocks (default :func:`tohgs.methods.kind_declarations`).
 
     Returns:
         Each method's replicas, the method itself first: ``{"ours": ["ours", "ours-seed1", ...]}``.
@@ -537,9 +560,10 @@ def add_seed_replicas(cfg: dict[str, Any], methods: list[str] | None = None) -> 
     seeds = list(cfg["seeds"])
     comps, meths = cfg["components"], cfg["methods"]
     names = list(meths) if methods is None else list(methods)
+    kinds = kind_declarations() if kinds is None else kinds
     closure: list[str] = []
-    for m in names:  # the methods with those they are of (kind filtered)
-        closure += [c for c in reversed(of_chain(m, meths)) if c not in closure]
+    for m in names:  # the methods with those whose predictions they read
+        closure += [c for c in reversed(of_chain(m, meths, kinds)) if c not in closure]
     used = list(dict.fromkeys(c for m in closure for c in method_components(meths[m], comps)))
     base_comps = {c: copy.deepcopy(comps[c]) for c in used}
     base_meths = {m: copy.deepcopy(meths[m]) for m in closure}
@@ -555,10 +579,11 @@ def add_seed_replicas(cfg: dict[str, Any], methods: list[str] | None = None) -> 
             comps[replica_name(c, seeds, s)] = rep
         for m, block in base_meths.items():
             rep = copy.deepcopy(block)
+            reads = method_keys(kinds[block["kind"]], "method")
             for key, value in block.items():
                 if key in NOT_COMPONENT_KEYS or not isinstance(value, str):
                     continue
-                if value in base_comps or (key == "of" and value in base_meths):
+                if value in base_comps or (key in reads and value in base_meths):
                     rep[key] = replica_name(value, seeds, s)
             rep["settings"]["seed"] = int(block["settings"].get("seed", cfg["prediction"]["seed"])) + s
             meths[replica_name(m, seeds, s)] = rep

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from tohgs.hand.layout import FINGER_POSE_DIM, GLOBAL_ROTATION_DIM, TRANSLATION_DIM
+from tohgs.hand.layout import FINGER_POSE_DIM, GLOBAL_ROTATION_DIM, N_BETAS, TRANSLATION_DIM
 
 log = logging.getLogger(__name__)
 
@@ -39,7 +39,6 @@ FORMATS = ("obj", "ply", "glb", "npz")
 POSES = ("init", "goal")
 #: The 51-number vector's parts, in its order: (name, width).
 PARTS = (("transl", TRANSLATION_DIM), ("global_orient", GLOBAL_ROTATION_DIM), ("hand_pose", FINGER_POSE_DIM))
-BETAS = 10
 
 
 def split_grasps(grasps: np.ndarray) -> dict[str, np.ndarray]:
@@ -52,7 +51,7 @@ def split_grasps(grasps: np.ndarray) -> dict[str, np.ndarray]:
     for name, width in PARTS:
         out[name] = grasps[..., start:start + width]
         start += width
-    out["betas"] = np.zeros((*grasps.shape[:-1], BETAS))
+    out["betas"] = np.zeros((*grasps.shape[:-1], N_BETAS))
     return out
 
 

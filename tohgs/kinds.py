@@ -1,15 +1,22 @@
-"""Kinds found by name, a leaf module: the component kinds (modules of :mod:`tohgs.models` with a
-``COMPONENT``) and the method kinds (modules of :mod:`tohgs.methods` with a ``METHOD``), read as text so
-that the workflow's parse imports no torch."""
+"""Kinds found by name, and what they declare, a leaf module: the component kinds (modules of
+:mod:`tohgs.models` with a ``COMPONENT``) and the method kinds (modules of :mod:`tohgs.methods` with a
+``METHOD``), read as text so that the workflow's parse imports no torch, and their declarations, the
+schema's ``$defs`` blocks (``$defs.method_kinds.<kind>``, ``$defs.networks.<kind>``)."""
 
 from __future__ import annotations
 
+import copy
 import re
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
+
+import yaml
 
 #: What a kind's name looks like (a module name).
 KIND = re.compile(r"[a-z][a-z0-9_]*")
+#: The workflow configuration's schema, the one place a kind is declared.
+SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / "config.schema.yaml"
 
 
 @lru_cache(maxsize=None)
@@ -18,3 +25,14 @@ def kind_modules(folder: Path, marker: str) -> tuple[str, ...]:
     (``COMPONENT = ContactDiffuser``): the kinds; a helper module beside them (``train.py``) is none."""
     binds = re.compile(rf"^{re.escape(marker)}\s*=", re.MULTILINE)
     return tuple(sorted(p.stem for p in folder.glob("*.py") if KIND.fullmatch(p.stem) and binds.search(p.read_text())))
+
+
+@lru_cache(maxsize=None)
+def _schema_defs(path: Path) -> dict[str, Any]:
+    with open(path) as fh:
+        return yaml.safe_load(fh).get("$defs", {})
+
+
+def schema_defs(name: str, path: Path = SCHEMA_PATH) -> dict[str, Any]:
+    """A copy of the schema file's ``$defs.<name>`` (``method_kinds``, ``networks``): every kind's block."""
+    return copy.deepcopy(_schema_defs(Path(path)).get(name, {}))

@@ -242,7 +242,7 @@ def _run(mesh: Path, task: str, work: Path, results: Path, cfg: dict[str, Any], 
 
     qr = QualityThresholds(**{k: cfg["evaluation"]["qr"][k] for k in ("max_pv", "max_sd")})
     table = rows[["config_index", "sample", "kept", "pv", "sd", "init_opp", "goal_opp"]].copy()
-    table["quality"] = ((rows["pv"] < qr.max_pv) & (rows["sd"] < qr.max_sd)).to_numpy()  # QR's verdict
+    table["quality"] = qr.passes(rows["pv"], rows["sd"]).to_numpy()  # QR's verdict
     return {"mesh": str(mesh.resolve()), "object": name, "task": task, "method": method,
             "method_label": cfg["methods"][method]["label"], "scale": meta["scale"], "extents_m": meta["extents"],
             "collision_parts": meta["n_collision_parts"], "repairs": meta["repairs"], "configurations": configs,

@@ -56,7 +56,7 @@ class SynthesisSettings:
     """Grasp synthesis settings (SI units). Weights follow DexGraspNet-MANO; the budget, the schedule's
     decay intervals and the initial distance are set for CPU runs (see the config)."""
 
-    batch: int = 64
+    batch: int = 128
     iterations: int = 600
     n_contact: int = 4
     w_dis: float = 100.0

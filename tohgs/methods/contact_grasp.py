@@ -34,8 +34,8 @@ class ContactGraspSettings(GeneratorSettings):
     """A generator's sampling settings (``sampler`` and ``steps`` the contact component's), the grasp
     generator's sampler (``grasp_sampler``, ``grasp_steps``: the official ancestral DDPM over all 1000 steps
     by default) and ``steer``, the scene-aware guidance of its sampling (beyond the paper; every lever off by
-    default). A job is not given ``steer`` while it changes nothing (so that its settings are those of before
-    it existed): its defaults then."""
+    default). A job is not given ``steer`` while it is at its defaults (its schema block's ``x-optional``:
+    so that its settings are those of before it existed): the defaults then."""
 
     grasp_sampler: str = "ddpm"
     grasp_steps: int = 1000

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from tohgs.metrics.quality_thresholds import QualityThresholds
+
 #: The cells that get intervals (the counts ``grasps``, ``configs`` and ``discarded`` do not).
 INTERVAL_COLUMNS = ("pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "ds_per_vertex", "init_opp", "goal_opp",
                     "ts", "sd_robust", "sd_pass", "sd_unstable", "sd_palm_avg", "qr_palm")
@@ -92,10 +94,11 @@ def config_stats(frame: pd.DataFrame, keys: pd.DataFrame, max_pv: float, max_sd:
     if len(frame) == 0:
         return out
     sd_palm = palm_sd(frame)
+    t = QualityThresholds(max_pv, max_sd)
     f = frame.assign(pv2=frame.pv**2, sd2=frame.sd**2, contact=(frame.pv > 0).astype(float),
-                     quality=((frame.pv < max_pv) & (frame.sd < max_sd)).astype(float),
+                     quality=t.passes(frame.pv, frame.sd).astype(float),
                      has_palm=sd_palm.notna().astype(float), sd_palm=sd_palm.fillna(0.0),
-                     quality_palm=((frame.pv < max_pv) & (sd_palm < max_sd)).astype(float))
+                     quality_palm=t.passes(frame.pv, sd_palm).astype(float))
     g = f.groupby(["object", "config_index"])
     ds_g = config_ds(f).groupby(level=["object", "config_index"])
     agg = pd.DataFrame({"n": g.size(), "pv": g.pv.sum(), "pv2": g.pv2.sum(), "sd": g.sd.sum(), "sd2": g.sd2.sum(),

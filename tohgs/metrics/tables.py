@@ -47,7 +47,6 @@ A table's ``paper`` list adds the paper's printed Table 1 value of those metrics
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -56,6 +55,7 @@ import pandas as pd
 from tohgs.metrics.bootstrap import (INTERVAL_COLUMNS, BootstrapSettings, config_ds, config_keys, config_stats,
                                      intervals, palm_sd, resample_weights, robust_stats)
 from tohgs.metrics.paper import PAPER_METRICS, paper_value
+from tohgs.metrics.quality_thresholds import QualityThresholds  # noqa: F401  (the tables' readers take it from here)
 
 SEED_SPREAD_COLUMNS = ("qr", "ts")  # the columns whose spread across seeds the tables add
 METRIC_COLUMNS = ("pv_avg", "pv_std", "sd_avg", "sd_std", "cr", "qr", "ds", "ds_per_vertex", "init_opp", "goal_opp",
@@ -77,21 +77,13 @@ def _header(column: str) -> str:
     return _HEADERS.get(column, column)
 
 
-@dataclass(frozen=True)
-class QualityThresholds:
-    """A grasp is of quality if PV < ``max_pv`` (m^3) and SD < ``max_sd`` (m); the paper's 3 cm^3, 2 cm."""
-
-    max_pv: float = 3e-6
-    max_sd: float = 0.02
-
-
 def quality_ratio(frame: pd.DataFrame, t: QualityThresholds) -> float:
     """QR in % of the kept grasps (NaN without rows)."""
     if "kept" in frame.columns:
         frame = frame[frame.kept.astype(bool)]
     if len(frame) == 0:
         return float("nan")
-    return float(((frame.pv < t.max_pv) & (frame.sd < t.max_sd)).mean() * 100)
+    return float(t.passes(frame.pv, frame.sd).mean() * 100)
 
 
 def summarize(frame: pd.DataFrame, t: QualityThresholds, task_configs: int | None = None) -> dict[str, float]:
@@ -119,7 +111,7 @@ def summarize(frame: pd.DataFrame, t: QualityThresholds, task_configs: int | Non
     sd_palm = palm_sd(frame)
     has_palm = sd_palm.notna()
     palm = ({"sd_palm_avg": float(sd_palm[has_palm].mean() * 100),
-             "qr_palm": float(((frame.pv[has_palm] < t.max_pv) & (sd_palm[has_palm] < t.max_sd)).mean() * 100)}
+             "qr_palm": float(t.passes(frame.pv[has_palm], sd_palm[has_palm]).mean() * 100)}
             if has_palm.any() else dict.fromkeys(("sd_palm_avg", "qr_palm"), float("nan")))
     robust = ({"sd_robust": float(rob.sd_robust.mean() * 100), "sd_pass": float(rob.sd_pass.mean() * 100),
                "sd_unstable": float(rob.sd_unstable.mean() * 100)} if len(rob) else

@@ -1,14 +1,13 @@
 """Components, the trainable networks (:mod:`tohgs.models.component`): the diffusers, PointNet++, the one
 training loop and the one checkpoint format. Importing this package imports no torch: the workflow and the
-config validation use :func:`component_kind_exists` and :data:`CHECKED_KINDS` at parse time."""
+config validation use :func:`component_kind_exists` and :func:`component_checks` at parse time."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from tohgs.kinds import kind_modules
+from tohgs.kinds import kind_modules, schema_defs
 
-CHECKED_KINDS = ("contact_diffuser", "grasp_diffuser", "contact_gen")  # component kinds with checks (checks.py)
 _MODELS_DIR = Path(__file__).resolve().parent
 
 
@@ -20,3 +19,9 @@ def component_kinds() -> list[str]:
 def component_kind_exists(kind: str) -> bool:
     """Whether ``kind`` is a component kind (:func:`component_kinds`; ``train``, the loop's module, is not)."""
     return kind in component_kinds()
+
+
+def component_checks() -> dict[str, list[str]]:
+    """The checks (names of :data:`tohgs.models.checks.CHECKS`) of each component kind that declares some:
+    its schema block's ``x-checks`` (``$defs.networks.<kind>``), by kind."""
+    return {k: list(v["x-checks"]) for k, v in schema_defs("networks").items() if v.get("x-checks")}

@@ -26,8 +26,11 @@ Both return plain dicts (JSON-able) and are what ``results/models/<task>/checks.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +41,6 @@ from tohgs.geometry.neighbours import nearest_neighbours
 from tohgs.hand.model import HandModel
 from tohgs.hand.rotations import axis_angle_to_matrix
 from tohgs.data.batch import Batch
-from tohgs.models import CHECKED_KINDS
 from tohgs.models.checkpoint import load_component
 from tohgs.models.diffusion import sample
 from tohgs.models.grasp_diffuser import GraspCondition
@@ -88,7 +90,7 @@ def shuffled_condition_gap(model, data: MapDataset, n_samples: int = 256, seed: 
         perm = torch.where(perm == torch.arange(n_samples), perm.roll(1), perm)
     sched = model.schedule
     shuffled = batch.index(perm)
-    grasps = model.kind == "grasp_diffuser"
+    grasps = model.role == "grasp"
     if grasps:
         own = model.condition(batch.points, batch.normals, batch.contact)
         other = model.condition(shuffled.points, shuffled.normals, shuffled.contact)
@@ -422,34 +424,64 @@ def representation_fit(model, hand: HandModel, data: MapDataset, curve: list[dic
     return result
 
 
+@dataclass
+class _Subject:
+    """What a check measures: a trained component on its task's training shards."""
+
+    model: object
+    meta: dict
+    hand: HandModel
+    plain: MapDataset  # the training shards, one item per grasp, unturned
+    shard_paths: list
+    seed: int
+
+    @functools.cached_property
+    def seen(self) -> MapDataset:
+        """The training shards as the model was trained on them: its own augmentation."""
+        cfg = self.meta["training_config"]
+        return MapDataset(self.shard_paths, per="grasp", rotation=cfg["rotation"], seed=self.seed,
+                          rotation_max=cfg.get("rotation_max", np.pi / 6))
+
+
+#: The checks a component kind may declare (its schema block's ``x-checks``), by name: the key of its result
+#: in ``checks.json`` and the measurement.
+CHECKS: dict[str, tuple[str, Callable[[_Subject], dict]]] = {
+    "shuffled_condition": ("shuffled_condition", lambda s: shuffled_condition_gap(s.model, s.seen, seed=s.seed)),
+    "permuted_map": ("permuted_map", lambda s: permuted_map_gap(s.model, s.seen, seed=s.seed)),
+    "contact_fit": ("fit", lambda s: contact_fit(s.model, s.plain, seed=s.seed)),
+    "grasp_fit": ("fit", lambda s: grasp_fit(s.model, s.hand, s.plain, seed=s.seed)),
+    "representation_fit": ("fit", lambda s: representation_fit(s.model, s.hand, s.plain, s.meta.get("loss_curve"),
+                                                               seed=s.seed)),
+}
+
+
 def model_checks(task: str, shard_paths: list[str | Path], checkpoints: dict[str, str | Path], hand: HandModel,
-                 out: str | Path, seed: int = 0) -> dict:
-    """Both measurements for each of a task's trained diffusers (``checkpoints``: by component name) on their
-    training shards; written as JSON, one entry per component (a kind without checks says so)."""
+                 out: str | Path, checks: dict[str, list[str]], seed: int = 0) -> dict:
+    """The checks of each of a task's trained components (``checkpoints``: by component name) on their
+    training shards; ``checks``: the names (of :data:`CHECKS`) each component's kind declares (its schema
+    block's ``x-checks``; none: the entry says so). Written as JSON, one entry per component.
+
+    Raises:
+        ValueError: a check name :data:`CHECKS` does not know.
+    """
     from tohgs.io import write_json
 
+    unknown = sorted({c for names in checks.values() for c in names} - set(CHECKS))
+    if unknown:
+        raise ValueError(f"unknown model checks {unknown} (known: {', '.join(CHECKS)})")
     torch.set_num_threads(1)
     result: dict = {"task": task}
     plain = MapDataset(shard_paths, per="grasp", rotation="none")
     for name, ckpt in checkpoints.items():
         model, meta = load_component(ckpt, task=task, component=name)
-        if model.kind not in CHECKED_KINDS:
+        if not checks.get(name):
             result[name] = {"kind": model.kind, "checks": "none for this kind"}
             continue
-        if model.kind == "contact_gen":
-            result[name] = {"kind": model.kind, "fit": representation_fit(model, hand, plain, meta.get("loss_curve"),
-                                                                          seed=seed)}
-            log.info("%s/%s: %s", task, name, result[name])
-            continue
-        # the gap is measured on what the model was trained on: its own augmentation
-        seen = MapDataset(shard_paths, per="grasp", rotation=meta["training_config"]["rotation"], seed=seed,
-                          rotation_max=meta["training_config"].get("rotation_max", np.pi / 6))
-        result[name] = {"kind": model.kind, "shuffled_condition": shuffled_condition_gap(model, seen, seed=seed)}
-        if model.kind == "grasp_diffuser":
-            result[name]["fit"] = grasp_fit(model, hand, plain, seed=seed)
-        else:
-            result[name]["permuted_map"] = permuted_map_gap(model, seen, seed=seed)
-            result[name]["fit"] = contact_fit(model, plain, seed=seed)
+        subject = _Subject(model, meta, hand, plain, list(shard_paths), seed)
+        result[name] = {"kind": model.kind}
+        for check in checks[name]:
+            key, measure = CHECKS[check]
+            result[name][key] = measure(subject)
         log.info("%s/%s: %s", task, name, result[name])
     write_json(out, result)
     return result

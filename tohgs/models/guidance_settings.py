@@ -1,5 +1,6 @@
-"""The settings of scene-aware guided sampling (:mod:`tohgs.models.guidance`), without torch: the workflow
-reads :attr:`GuidanceSettings.changes_sampling` when it parses the config."""
+"""The settings of scene-aware guided sampling (:mod:`tohgs.models.guidance`), without torch: the settings
+of contact_grasp's ``steer`` block, which a job is given only when it is set (its schema block's
+``x-optional``: :func:`tohgs.config.job_settings`)."""
 
 from __future__ import annotations
 
@@ -68,10 +69,3 @@ class GuidanceSettings:
     def selects(self) -> bool:
         """Whether more grasps are sampled than kept (``candidates > 1``)."""
         return self.candidates > 1
-
-    @property
-    def changes_sampling(self) -> bool:
-        """Whether any lever is on (:attr:`active`, :attr:`contact_active` or :attr:`selects`); otherwise the
-        sampler is the faithful one, bit for bit, and the workflow leaves these settings out of the
-        predictions' parameters (``method_settings`` in workflow/rules/common.smk)."""
-        return self.active or self.contact_active or self.selects

@@ -27,10 +27,8 @@ from tohgs.config import (
 )
 from tohgs.assets.splits import check_split_sizes
 from tohgs.assets.sources import select_objects, task_set
-from tohgs.methods import method_components, of_chain
-from tohgs.models import CHECKED_KINDS
-from tohgs.models.guidance_settings import GuidanceSettings
-from tohgs.settings import settings_from
+from tohgs.methods import base_method, method_components, of_chain
+from tohgs.models import component_checks
 from tohgs.scheduler_timers import coalesce_scheduler_timers
 
 # One pending re-scheduling timer instead of a chain per job event (tohgs/scheduler_timers.py): the
@@ -365,8 +363,10 @@ if (
 
 # The seed replicas (config key seeds): every table row's method, and what it builds on, once per seed
 # but the first, as components and methods of their own (tohgs.config.add_seed_replicas).
+# Each method kind's declaration (tohgs.methods.kind_declarations).
+KINDS = _SCHEMA["$defs"]["method_kinds"]
 REPLICAS = add_seed_replicas(
-    config, [m for t in config["tables"].values() for m in t["rows"]]
+    config, [m for t in config["tables"].values() for m in t["rows"]], KINDS
 )
 SEED_OF = {
     r: seed for reps in REPLICAS.values() for r, seed in zip(reps, config["seeds"])
@@ -405,8 +405,9 @@ def used_methods():
     ]
     names += [m for ms in config["figures"]["comparisons"].values() for m in ms]
     out = []
-    for m in names:  # with the methods they are of (kind filtered), first
-        out += reversed(of_chain(m, METHODS))
+    # with the methods whose predictions they read (F-GraspTTA's of), first
+    for m in names:
+        out += reversed(of_chain(m, METHODS, KINDS))
     return list(dict.fromkeys(out))
 
 
@@ -429,14 +430,9 @@ def component_settings(wildcards):
 
 def method_settings(wildcards):
     """The prediction settings of one method's jobs, exactly those its kind reads (tohgs.config.job_settings:
-    so a sampler setting leaves the dataset row's draw be); ``steer`` only while it changes the sampling.
+    so a sampler setting leaves the dataset row's draw be; an optional block only when set).
     """
-    settings = job_settings(config, wildcards.method, _SCHEMA)
-    if not settings_from(GuidanceSettings, settings.get("steer")).changes_sampling:
-        settings.pop(
-            "steer", None
-        )  # every lever off: the faithful sampler's settings, as before it existed
-    return _canonical(settings)
+    return _canonical(job_settings(config, wildcards.method, _SCHEMA))
 
 
 def figure_methods(wildcards):
@@ -518,8 +514,9 @@ def method_models(wildcards):
 
 
 def method_base(wildcards):
-    """The prediction store of the method this one is of (kind filtered), or none."""
-    base = METHODS[wildcards.method].get("of")
+    """The prediction store of the method whose predictions this one reads (its kind's key of role method:
+    F-GraspTTA's of), or none."""
+    base = base_method(wildcards.method, METHODS, KINDS)
     return [f"results/predictions/{wildcards.task}/{base}.zarr"] if base else []
 
 
@@ -533,9 +530,12 @@ def method_code(wildcards):
     return code("predict.py", *kinds)
 
 
+CHECKS_OF_KIND = component_checks()  # kind -> its schema block's x-checks
+
+
 def checked_components():
-    """The used components whose kinds have checks (tohgs.models.CHECKED_KINDS: the diffusers)."""
-    return [c for c in used_components() if COMPONENTS[c]["kind"] in CHECKED_KINDS]
+    """The used components whose kinds declare checks (``x-checks``: the diffusers, ContactGen)."""
+    return [c for c in used_components() if COMPONENTS[c]["kind"] in CHECKS_OF_KIND]
 
 
 def train_shards(wildcards):

@@ -71,7 +71,11 @@ rule model_checks:
     conda:
         "../envs/tohgs.yaml"
     params:
-        code=code("model_checks.py", *(f"models/{kind}" for kind in CHECKED_KINDS)),
+        code=code("model_checks.py", *(f"models/{kind}" for kind in CHECKS_OF_KIND)),
+        checks=lambda w: {
+            c: CHECKS_OF_KIND[COMPONENTS[c]["kind"]]
+            for c in sorted(checked_components())
+        },
         seed=setting("training", "seed"),
     script:
         "../scripts/model_checks.py"

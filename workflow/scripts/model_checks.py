@@ -1,4 +1,5 @@
-"""Snakemake script of rule model_checks: do a task's trained diffusers use their condition?"""
+"""Snakemake script of rule model_checks: the checks each trained component's kind declares (do a task's
+diffusers use their condition, do they fit their training data)."""
 from pathlib import Path
 
 from tohgs.io import setup_logging
@@ -10,4 +11,5 @@ from tohgs.models.checks import model_checks  # noqa: E402
 
 inp = snakemake.input
 model_checks(snakemake.wildcards.task, inp.shards, {Path(m).stem: m for m in inp.models},
-             HandModel(HandAssets.load(inp.hand)), snakemake.output[0], seed=snakemake.params.seed)
+             HandModel(HandAssets.load(inp.hand)), snakemake.output[0], snakemake.params.checks,
+             seed=snakemake.params.seed)
