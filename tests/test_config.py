@@ -360,3 +360,17 @@ def test_the_adaptation_overlay_adds_m_grasptta_rows_without_their_adaptation(re
             {k: v for k, v in adapted.items() if k not in ("label", "settings")}
     assert cfg["prediction"]["tta"]["steps"] > 0
     assert cfg["tables"]["adaptation"]["rows"][1::2] == ["m-grasptta-ta", "m-grasptta-gt"]
+
+
+def test_the_viewers_default_labels_are_the_validated_defaults_without_the_validator():
+    """The viewer's data module names the built-in methods from the schema file alone (it imports no
+    tohgs.config), with the labels the validated default config has."""
+    import ast
+    import inspect
+
+    import tohgs.viz.view_data as view_data
+
+    labels = {name: block["label"] for name, block in validate_config({})["methods"].items()}
+    assert view_data.default_labels() == labels
+    imported = {n.module for n in ast.walk(ast.parse(inspect.getsource(view_data))) if isinstance(n, ast.ImportFrom)}
+    assert "tohgs.config" not in imported

@@ -1,7 +1,8 @@
 """Kinds found by name, and what they declare, a leaf module: the component kinds (modules of
 :mod:`tohgs.models` with a ``COMPONENT``) and the method kinds (modules of :mod:`tohgs.methods` with a
 ``METHOD``), read as text so that the workflow's parse imports no torch, and their declarations, the
-schema's ``$defs`` blocks (``$defs.method_kinds.<kind>``, ``$defs.networks.<kind>``)."""
+schema's ``$defs`` blocks (``$defs.method_kinds.<kind>``, ``$defs.networks.<kind>``) and the built-in
+methods (the ``methods`` default)."""
 
 from __future__ import annotations
 
@@ -28,11 +29,17 @@ def kind_modules(folder: Path, marker: str) -> tuple[str, ...]:
 
 
 @lru_cache(maxsize=None)
-def _schema_defs(path: Path) -> dict[str, Any]:
+def _schema(path: Path) -> dict[str, Any]:
     with open(path) as fh:
-        return yaml.safe_load(fh).get("$defs", {})
+        return yaml.safe_load(fh)
 
 
 def schema_defs(name: str, path: Path = SCHEMA_PATH) -> dict[str, Any]:
     """A copy of the schema file's ``$defs.<name>`` (``method_kinds``, ``networks``): every kind's block."""
-    return copy.deepcopy(_schema_defs(Path(path)).get(name, {}))
+    return copy.deepcopy(_schema(Path(path)).get("$defs", {}).get(name, {}))
+
+
+def schema_default(key: str, path: Path = SCHEMA_PATH) -> Any:
+    """A copy of the schema file's default of the top-level config key ``key`` as written there (``methods``:
+    the built-in methods; no overlay, no validation: :func:`tohgs.config.validate_config` fills the rest)."""
+    return copy.deepcopy(_schema(Path(path))["properties"][key]["default"])

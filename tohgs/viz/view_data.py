@@ -55,10 +55,10 @@ def available_tasks(results_dir: str | Path) -> list[str]:
 
 
 def default_labels() -> dict[str, str]:
-    """Every method's ``label`` in the embedded default config (the schema's defaults)."""
-    from tohgs.config import validate_config
+    """Every built-in method's ``label`` (the schema's default ``methods``)."""
+    from tohgs.kinds import schema_default
 
-    return {name: block["label"] for name, block in validate_config({})["methods"].items()}
+    return {name: block["label"] for name, block in schema_default("methods").items()}
 
 
 @dataclass
