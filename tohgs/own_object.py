@@ -54,8 +54,9 @@ def _object_name(mesh: Path, taken: set[str]) -> str:
     return name
 
 
-def _models_of(results: Path, task: str, method: str, cfg: dict[str, Any]) -> list[str]:
-    """The chain of methods to predict (the one asked for last) after checking the models exist."""
+def _models_of(results: Path, task: str, method: str, cfg: dict[str, Any]) -> dict[str, dict[str, Path]]:
+    """The chain of methods to predict (the one asked for last), each with its components' checkpoints (by
+    component name), after checking that they exist."""
     from tohgs.methods import method_components, of_chain, reads_ground_truth
 
     methods = cfg["methods"]
@@ -65,15 +66,21 @@ def _models_of(results: Path, task: str, method: str, cfg: dict[str, Any]) -> li
     if reads_ground_truth(method, methods):
         raise OwnObjectError(f"--method {method!r} reads the test configurations' ground-truth grasps, which a new "
                              "object does not have; take a method that predicts (e.g. ours)")
-    chain = list(reversed(of_chain(method, methods)))
-    missing = [results / "models" / task / f"{c}.pt" for m in chain
-               for c in method_components(methods[m], cfg["components"])]
-    missing = [p for p in missing if not p.is_file()]
+    chain = {m: {c: results / "models" / task / f"{c}.pt" for c in method_components(methods[m], cfg["components"])}
+             for m in reversed(of_chain(method, methods))}
+    missing = [p for models in chain.values() for p in models.values() if not p.is_file()]
     if missing:
         raise OwnObjectError(f"method {method!r} of task {task!r} has no trained models in {results}: "
                              f"{', '.join(map(str, missing))} missing; train them with "
                              f"make reproduce TARGET={missing[0]}")
     return chain
+
+
+def _thresholds(cfg: dict[str, Any]):
+    """The run's quality-ratio thresholds (``evaluation.qr``), as the tables take them."""
+    from tohgs.metrics.quality_thresholds import QualityThresholds
+
+    return QualityThresholds(**{k: cfg["evaluation"]["qr"][k] for k in ("max_pv", "max_sd")})
 
 
 def grasp_own_object(mesh: str | Path, task: str, out: str | Path, results: str | Path = "results",
@@ -143,7 +150,7 @@ def grasp_own_object(mesh: str | Path, task: str, out: str | Path, results: str 
         summary = _run(mesh, task, tmp, results, cfg, chain, n, configs, times, scene)
         configs = summary["configurations"]
         tick = time.perf_counter()
-        _exports(tmp, task, chain[-1], formats, viewer, configs, cfg)
+        _exports(tmp, task, list(chain)[-1], formats, viewer, configs, cfg)
         times["exports"] = time.perf_counter() - tick
         times["total"] = time.perf_counter() - t_start
         summary["seconds"] = {k: round(v, 2) for k, v in times.items()}
@@ -153,8 +160,8 @@ def grasp_own_object(mesh: str | Path, task: str, out: str | Path, results: str 
     return summary
 
 
-def _run(mesh: Path, task: str, work: Path, results: Path, cfg: dict[str, Any], chain: list[str], n: int,
-         configs: int, times: dict[str, float], scene: str | Path | None = None) -> dict[str, Any]:
+def _run(mesh: Path, task: str, work: Path, results: Path, cfg: dict[str, Any], chain: dict[str, dict[str, Path]],
+         n: int, configs: int, times: dict[str, float], scene: str | Path | None = None) -> dict[str, Any]:
     """The stages, in ``work`` (the output folder being built); fills ``times`` per step."""
     import numpy as np
 
@@ -163,10 +170,9 @@ def _run(mesh: Path, task: str, work: Path, results: Path, cfg: dict[str, Any], 
     from tohgs.config import evaluation_sd_settings, job_settings
     from tohgs.data.build_maps import make_map_shard
     from tohgs.hand import HandAssets
-    from tohgs.methods import method_components
     from tohgs.methods.predict import predict
     from tohgs.metrics.evaluate import evaluate_predictions
-    from tohgs.metrics.tables import QualityThresholds, quality_ratio
+    from tohgs.metrics.tables import quality_ratio
     from tohgs.data.scenes import write_scenes
     from tohgs.scene_file import read_scene_file, write_scene_file
     from tohgs.sim.scenes import make_scene_store
@@ -220,11 +226,9 @@ def _run(mesh: Path, task: str, work: Path, results: Path, cfg: dict[str, Any], 
     tick = time.perf_counter()
     (work / "predictions" / task).mkdir(parents=True)
     base = None
-    for m in chain:
+    for m, models in chain.items():
         block = {k: v for k, v in cfg["methods"][m].items() if k != "label"}
         settings = {**job_settings(cfg, m), "samples": n, "threads": max(1, min(os.cpu_count() or 1, 4))}
-        models = {c: results / "models" / task / f"{c}.pt" for c in method_components(cfg["methods"][m],
-                                                                                       cfg["components"])}
         store = work / "predictions" / task / f"{m}.zarr"
         predict(task, m, block, [shard], models, settings, store, hand=work / "hand" / "hand.npz", base=base,
                 complete=True)
@@ -232,7 +236,7 @@ def _run(mesh: Path, task: str, work: Path, results: Path, cfg: dict[str, Any], 
     times["grasps"] = time.perf_counter() - tick
 
     tick = time.perf_counter()
-    method = chain[-1]
+    method = list(chain)[-1]
     rows = evaluate_predictions(base, [scene_store], objects_dir, supports, hand, evaluation_sd_settings(cfg),
                                 cfg["metrics"]["voxel_pitch"], cfg["cache_dir"], pv_mesh=cfg["evaluation"]["pv_mesh"],
                                 sd_hand=cfg["evaluation"]["sd_hand"])
@@ -240,7 +244,7 @@ def _run(mesh: Path, task: str, work: Path, results: Path, cfg: dict[str, Any], 
     rows.to_parquet(work / "metrics" / task / f"{method}.parquet", index=False)
     times["evaluation"] = time.perf_counter() - tick
 
-    qr = QualityThresholds(**{k: cfg["evaluation"]["qr"][k] for k in ("max_pv", "max_sd")})
+    qr = _thresholds(cfg)
     table = rows[["config_index", "sample", "kept", "pv", "sd", "init_opp", "goal_opp"]].copy()
     table["quality"] = qr.passes(rows["pv"], rows["sd"]).to_numpy()  # QR's verdict
     return {"mesh": str(mesh.resolve()), "object": name, "task": task, "method": method,
@@ -268,14 +272,11 @@ def _exports(work: Path, task: str, method: str, formats: tuple[str, ...], viewe
                      HandAssets.load(work / "hand" / "hand.npz"), work / "grasps.png", max_configs=configs,
                      labels=[cfg["methods"][method]["label"]])
     if viewer:
-        from tohgs.metrics.tables import QualityThresholds
         from tohgs.viz.view import export_html
         from tohgs.viz.view_data import TaskResults
 
-        qr = cfg["evaluation"]["qr"]
         labels = {method: cfg["methods"][method]["label"]}
-        data = TaskResults.from_results(work, task, labels=labels,
-                                        thresholds=QualityThresholds(**{k: qr[k] for k in ("max_pv", "max_sd")}))
+        data = TaskResults.from_results(work, task, labels=labels, thresholds=_thresholds(cfg))
         export_html(data, work / "viewer.html", configs=configs, samples=4, methods=[method])
 
 
