@@ -361,10 +361,10 @@ if (
             file=sys.stderr,
         )
 
-# The seed replicas (config key seeds): every table row's method, and what it builds on, once per seed
-# but the first, as components and methods of their own (tohgs.config.add_seed_replicas).
 # Each method kind's declaration (tohgs.methods.kind_declarations).
 KINDS = _SCHEMA["$defs"]["method_kinds"]
+# The seed replicas (config key seeds): every table row's method, and what it builds on, once per seed
+# but the first, as components and methods of their own (tohgs.config.add_seed_replicas).
 REPLICAS = add_seed_replicas(
     config, [m for t in config["tables"].values() for m in t["rows"]], KINDS
 )
