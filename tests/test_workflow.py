@@ -360,8 +360,6 @@ USED = _used_methods(SMOKE)
 N_MAPS = N_TASKS * sum(SMOKE["maps"]["shards"].values())  # every task's shards of each split
 N_COMPONENTS = len({c for m in USED for c in _components_of(m)})  # the used methods' components
 N_METHODS, N_TABLES = len(USED), len(SMOKE["tables"])
-OURS = _methods_using("contact_diffuser") | _methods_using("grasp_diffuser")
-N_TABLES_OF_OURS = _tables_with(OURS)  # the tables with a row read from ContactDiffuser or GraspDiffuser
 MODELS = {"train": N_TASKS * N_COMPONENTS, "predict": N_TASKS * N_METHODS, "model_checks": N_TASKS}
 # The evaluation of every task's predictions (and the viewer's static export of each task, rule viewer, which
 # draws every table row's predictions with their metrics).
@@ -382,10 +380,9 @@ def _stale_predictions(methods: set[str]) -> dict[str, int]:
     return out
 
 
-def _evaluated(methods_per_task: int, tasks: int = 3, tables: int = N_TABLES_OF_OURS) -> dict[str, int]:
+def _evaluated(methods_per_task: int, tasks: int, tables: int) -> dict[str, int]:
     """The evaluation jobs after ``methods_per_task`` prediction stores of ``tasks`` tasks changed (the
-    figures read ``ours`` of every task; ``tables`` tables have a changed row: those with a row read from
-    ``ours`` unless said)."""
+    figures read ``ours`` of every task; ``tables`` tables have a changed row)."""
     return {"evaluate": methods_per_task * tasks, "table": tables, "claims": 1, "predictions_figure": tasks,
             "contact_maps_figure": 1, "viewer": tasks}
 

@@ -17,11 +17,10 @@ from pathlib import Path
 from typing import Any
 
 import jsonschema
-import yaml
 
-from tohgs.kinds import SCHEMA_PATH
+from tohgs.kinds import SCHEMA_PATH, read_schema
 from tohgs.methods import (NOT_COMPONENT_KEYS, SAMPLING_KEYS, kind_declarations, method_components,
-                           method_kind_exists, method_keys, of_chain)
+                           method_kind_exists, method_keys, of_chain, registered_declarations)
 from tohgs.models import component_kind_exists
 from tohgs.settings import merge
 
@@ -50,10 +49,9 @@ def load_schema(path: Path | str = SCHEMA_PATH) -> dict[str, Any]:
     """Read the YAML JSON-schema of the workflow configuration, with the registered method kinds' blocks
     (:func:`tohgs.methods.register_method_kind`) under ``$defs.method_kinds`` and every kind's settings
     blocks in the ``prediction`` block (:func:`with_method_blocks`)."""
-    with open(path) as fh:
-        schema = yaml.safe_load(fh)
+    schema = read_schema(path)
     kinds = schema.setdefault("$defs", {}).setdefault("method_kinds", {})
-    kinds.update({k: v for k, v in kind_declarations().items() if k not in kinds})
+    kinds.update({k: v for k, v in registered_declarations().items() if k not in kinds})
     return with_method_blocks(schema)
 
 
@@ -625,10 +623,10 @@ def drop_ground_truth_rows(cfg: dict[str, Any], reason: str) -> list[str]:
     """
     from tohgs.methods import reads_ground_truth
 
-    meths = cfg["methods"]
+    meths, kinds = cfg["methods"], kind_declarations()  # the declarations read once
     dropped: list[str] = []
     for name, table in cfg["tables"].items():
-        gt = [m for m in table["rows"] if reads_ground_truth(m, meths)]
+        gt = [m for m in table["rows"] if reads_ground_truth(m, meths, kinds)]
         if not gt:
             continue
         if len(gt) == len(table["rows"]):
@@ -641,11 +639,11 @@ def drop_ground_truth_rows(cfg: dict[str, Any], reason: str) -> list[str]:
         dropped += [m for m in gt if m not in dropped]
     figures = cfg["figures"]
     for key in ("methods", "contact_methods"):
-        dropped += [m for m in figures[key] if reads_ground_truth(m, meths) and m not in dropped]
-        figures[key] = [m for m in figures[key] if not reads_ground_truth(m, meths)]
+        dropped += [m for m in figures[key] if reads_ground_truth(m, meths, kinds) and m not in dropped]
+        figures[key] = [m for m in figures[key] if not reads_ground_truth(m, meths, kinds)]
     for key, methods in list(figures.get("comparisons", {}).items()):
-        dropped += [m for m in methods if reads_ground_truth(m, meths) and m not in dropped]
-        kept = [m for m in methods if not reads_ground_truth(m, meths)]
+        dropped += [m for m in methods if reads_ground_truth(m, meths, kinds) and m not in dropped]
+        kept = [m for m in methods if not reads_ground_truth(m, meths, kinds)]
         if kept:
             figures["comparisons"][key] = kept
         else:  # a comparison of ground-truth rows only has nothing to show

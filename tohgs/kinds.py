@@ -34,6 +34,12 @@ def _schema(path: Path) -> dict[str, Any]:
         return yaml.safe_load(fh)
 
 
+def read_schema(path: Path | str = SCHEMA_PATH) -> dict[str, Any]:
+    """A copy of the schema file as written (parsed once per process; :func:`tohgs.config.load_schema` adds
+    what the registered kinds declare)."""
+    return copy.deepcopy(_schema(Path(path)))
+
+
 def schema_defs(name: str, path: Path = SCHEMA_PATH) -> dict[str, Any]:
     """A copy of the schema file's ``$defs.<name>`` (``method_kinds``, ``networks``): every kind's block."""
     return copy.deepcopy(_schema(Path(path)).get("$defs", {}).get(name, {}))

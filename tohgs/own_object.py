@@ -76,13 +76,6 @@ def _models_of(results: Path, task: str, method: str, cfg: dict[str, Any]) -> di
     return chain
 
 
-def _thresholds(cfg: dict[str, Any]):
-    """The run's quality-ratio thresholds (``evaluation.qr``), as the tables take them."""
-    from tohgs.metrics.quality_thresholds import QualityThresholds
-
-    return QualityThresholds(**{k: cfg["evaluation"]["qr"][k] for k in ("max_pv", "max_sd")})
-
-
 def grasp_own_object(mesh: str | Path, task: str, out: str | Path, results: str | Path = "results",
                      configfiles: list[str | Path] = (), method: str = "ours", n: int = 16, configs: int = 1,
                      formats: tuple[str, ...] = ("obj", "npz"), viewer: bool = True, seed: int | None = None,
@@ -172,7 +165,7 @@ def _run(mesh: Path, task: str, work: Path, results: Path, cfg: dict[str, Any], 
     from tohgs.hand import HandAssets
     from tohgs.methods.predict import predict
     from tohgs.metrics.evaluate import evaluate_predictions
-    from tohgs.metrics.tables import quality_ratio
+    from tohgs.metrics.tables import QualityThresholds, quality_ratio
     from tohgs.data.scenes import write_scenes
     from tohgs.scene_file import read_scene_file, write_scene_file
     from tohgs.sim.scenes import make_scene_store
@@ -244,7 +237,7 @@ def _run(mesh: Path, task: str, work: Path, results: Path, cfg: dict[str, Any], 
     rows.to_parquet(work / "metrics" / task / f"{method}.parquet", index=False)
     times["evaluation"] = time.perf_counter() - tick
 
-    qr = _thresholds(cfg)
+    qr = QualityThresholds(**cfg["evaluation"]["qr"])
     table = rows[["config_index", "sample", "kept", "pv", "sd", "init_opp", "goal_opp"]].copy()
     table["quality"] = qr.passes(rows["pv"], rows["sd"]).to_numpy()  # QR's verdict
     return {"mesh": str(mesh.resolve()), "object": name, "task": task, "method": method,
@@ -272,11 +265,13 @@ def _exports(work: Path, task: str, method: str, formats: tuple[str, ...], viewe
                      HandAssets.load(work / "hand" / "hand.npz"), work / "grasps.png", max_configs=configs,
                      labels=[cfg["methods"][method]["label"]])
     if viewer:
+        from tohgs.metrics.tables import QualityThresholds
         from tohgs.viz.view import export_html
         from tohgs.viz.view_data import TaskResults
 
         labels = {method: cfg["methods"][method]["label"]}
-        data = TaskResults.from_results(work, task, labels=labels, thresholds=_thresholds(cfg))
+        data = TaskResults.from_results(work, task, labels=labels,
+                                        thresholds=QualityThresholds(**cfg["evaluation"]["qr"]))
         export_html(data, work / "viewer.html", configs=configs, samples=4, methods=[method])
 
 

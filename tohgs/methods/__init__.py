@@ -47,15 +47,18 @@ def method_module(kind: str) -> str:
     return _REGISTERED[kind][0] if kind in _REGISTERED else f"tohgs.methods.{kind}"
 
 
+def registered_declarations() -> dict[str, dict[str, Any]]:
+    """The schema blocks of the kinds registered by :func:`register_method_kind`, by kind (copies)."""
+    return {k: dict(decl) for k, (_, decl) in _REGISTERED.items()}
+
+
 def kind_declarations() -> dict[str, dict[str, Any]]:
     """Every method kind's schema block, by kind: the schema file's ``$defs.method_kinds`` and the registered
     kinds' (:func:`register_method_kind`). A block holds ``keys`` (each method key the kind takes: the
     ``role`` of what it names, a component's role or ``method``, its ``fixed`` sources and a
     ``description``), ``settings``, ``blocks`` and ``reads_ground_truth`` (its predictions are the
     configurations' own task grasps)."""
-    kinds = schema_defs("method_kinds")
-    kinds.update({k: dict(decl) for k, (_, decl) in _REGISTERED.items()})
-    return kinds
+    return {**schema_defs("method_kinds"), **registered_declarations()}
 
 
 def method_kinds() -> list[str]:
