@@ -110,3 +110,24 @@ def test_points_resting_on_the_hand_are_not_penetration_for_the_surface_distance
     inside = (offset * normals[0, idx[0]]).sum(-1) < 0
     proxy = (inside * (offset.norm(dim=-1) - 1e-3).clamp_min(0)).sum()
     assert float(proxy) > 20 * max(float((-sd - 1e-3).clamp_min(0).sum()), 1e-6)
+
+
+def test_the_blocked_face_search_equals_one_block(posed, monkeypatch):
+    """closest_faces searches its points in blocks (SEARCH_CHUNK): blocks of 7 points, a block of them all
+    and the default give the same faces, with a mask that skips some points."""
+    import tohgs.geometry.surface_distance as sdist
+
+    hand, v, pts, _ = posed
+    p = torch.as_tensor(pts, dtype=v.dtype).reshape(2, -1, 3)
+    verts = torch.stack([v, v + 0.001])
+    idx = nearest_index(p, verts)
+    rings = vertex_rings(hand.closed_faces, len(v), 32)
+    where = torch.arange(p.shape[1])[None].expand(2, -1) % 3 != 0
+    faces = {}
+    for chunk in (7, 10**9, sdist.SEARCH_CHUNK):
+        monkeypatch.setattr(sdist, "SEARCH_CHUNK", chunk)
+        faces[chunk] = sdist.closest_faces(p, verts, hand.closed_faces, rings, idx, where)
+    assert torch.equal(faces[7], faces[10**9]) and torch.equal(faces[sdist.SEARCH_CHUNK], faces[10**9])
+    # a search happened: some searched points' faces are not their ring's first
+    first = hand.closed_faces[rings[idx, 0]]
+    assert not torch.equal(faces[7][where], first[where])

@@ -20,6 +20,10 @@ import torch
 
 from tohgs.geometry.hand_object import vertex_normals
 
+# Points per block of closest_faces' search: its (points x faces) intermediates stay in the CPU's cache
+# (1.5-1.8x faster than one block of 30,000 points x 32 faces; the same faces, point by point)
+SEARCH_CHUNK = 2048
+
 
 def vertex_rings(faces: torch.Tensor, n_vertices: int, width: int | None = None, depth: int = 2) -> torch.Tensor:
     """(V, K) the faces around each vertex: with ``depth`` 1 the faces that use it (its one-ring), with 2
@@ -100,19 +104,21 @@ def closest_faces(points: torch.Tensor, vertices: torch.Tensor, faces: torch.Ten
     among the faces around its given vertex ``idx`` (B, N) (its nearest vertex of the hand, or of one hand
     part; ``rings``: :func:`vertex_rings`), for (B, N, 3) points and hands with (B, V, 3) ``vertices`` and
     (F, 3) ``faces``; no gradient. ``where`` (B, N) bool: search only those points (the others get the
-    first face of their ring, for the caller to ignore)."""
+    first face of their ring, for the caller to ignore). Searched in blocks of :data:`SEARCH_CHUNK` points."""
     with torch.no_grad():
         first = faces[rings[idx, 0]]  # (B, N, 3)
         if where is None:
             where = torch.ones(idx.shape, dtype=torch.bool, device=idx.device)
         hand_of, point_of = torch.nonzero(where, as_tuple=True)  # (M,) the points searched
-        tri = faces[rings[idx[hand_of, point_of]]]  # (M, K, 3) vertex indices
-        corners = vertices.detach()[hand_of[:, None, None], tri]  # (M, K, 3, 3)
-        p = points.detach()[hand_of, point_of][:, None, :]  # (M, 1, 3)
-        q = closest_point_on_triangles(p, corners[..., 0, :], corners[..., 1, :], corners[..., 2, :])
-        best = ((p - q) ** 2).sum(-1).argmin(-1)  # (M,)
         out = first.clone()
-        out[hand_of, point_of] = tri[torch.arange(len(best), device=best.device), best]
+        for start in range(0, len(hand_of), SEARCH_CHUNK):
+            h, i = hand_of[start:start + SEARCH_CHUNK], point_of[start:start + SEARCH_CHUNK]
+            tri = faces[rings[idx[h, i]]]  # (m, K, 3) vertex indices
+            corners = vertices.detach()[h[:, None, None], tri]  # (m, K, 3, 3)
+            p = points.detach()[h, i][:, None, :]  # (m, 1, 3)
+            q = closest_point_on_triangles(p, corners[..., 0, :], corners[..., 1, :], corners[..., 2, :])
+            best = ((p - q) ** 2).sum(-1).argmin(-1)  # (m,)
+            out[h, i] = tri[torch.arange(len(best), device=best.device), best]
         return out
 
 
