@@ -22,8 +22,8 @@ Per hand (each of the B problems has its own energy, so that they are solved tog
 The nearest hand vertices (of the assigned part, for ``E_contact``; of the whole hand, for
 ``E_penetration``) are searched without gradient every ``search_every`` steps and kept in between, as ICP
 keeps its correspondences; the distances to them are recomputed, with gradient, every step (1 searches every
-step: the exact nearest vertex). The part search looks only at the assigned part's vertices (a (16, P)
-table of each part's vertices, padded), not at the whole hand.
+step: the exact nearest vertex). The part search finds the nearest of the assigned part's vertices only (on
+the CPU a k-d tree per hand whose vertices are lifted by their part, :func:`nearest_part_vertex`).
 
 The point sums are scaled to ContactGen's 2048 points. Two stages with Adam (ContactGen's schedule):
 ``global_steps`` on the global rotation and translation only, with the contact and direction terms; then
