@@ -38,11 +38,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
 import torch
 
 from tohgs.geometry.contact_parts import N_PARTS, PartContact, part_contact
-from tohgs.geometry.hand_object import HAND_TREE, distance_to_vertices, nearest_index, vertex_normals
+from tohgs.geometry.hand_object import MATRIX_MAX_CLOUD, distance_to_vertices, nearest_index, vertex_normals
 from tohgs.geometry.surface_distance import closest_faces, corner_normals, distance_to_faces, vertex_rings
 from tohgs.grasps.tta import clamp_to_limits, pose_problems, problem_histories
 from tohgs.hand.layout import GRASP_DIM
@@ -98,7 +97,8 @@ def nearest_part_vertex(points: torch.Tensor, part: torch.Tensor, vertices: torc
     each of (B, K, 3) points, among that part's vertices only (``table``: :func:`part_table`); no
     gradient.
 
-    On the CPU (a hand of more than 256 vertices) a k-d tree per hand over the vertices lifted to four
+    On the CPU (a hand of more than :data:`~tohgs.geometry.hand_object.MATRIX_MAX_CLOUD` vertices) the k-d
+    trees of :func:`~tohgs.geometry.hand_object.nearest_index`, one per hand, over the vertices lifted to four
     coordinates, the fourth :data:`PART_SEPARATION` times the vertex's part, queried with the points
     lifted by their assigned part: a vertex of another part is at least that far, so the nearest lifted
     vertex is the nearest of the assigned part, at the same squared distance (the fourth coordinates are
@@ -106,18 +106,11 @@ def nearest_part_vertex(points: torch.Tensor, part: torch.Tensor, vertices: torc
     which is memory-bound on a CPU (:func:`tohgs.geometry.hand_object.nearest_index`); elsewhere the
     matrix."""
     with torch.no_grad():
-        if points.device.type == "cpu" and vertices.shape[1] > 256:
-            from scipy.spatial import cKDTree
-
-            labels = np.empty(vertices.shape[1])
-            labels[table.flatten().numpy()] = np.repeat(np.arange(table.shape[0]), table.shape[1])
-            v = vertices.detach().numpy().astype(np.float64)
-            p = points.detach().numpy().astype(np.float64)
-            lifted_v = np.concatenate([v, np.broadcast_to(PART_SEPARATION * labels[None, :, None], (*v.shape[:2], 1))], -1)
-            lifted_p = np.concatenate([p, PART_SEPARATION * part.numpy()[..., None].astype(np.float64)], -1)
-            out = (np.stack([cKDTree(lifted_v[b], **HAND_TREE).query(lifted_p[b], k=1)[1] for b in range(len(p))])
-                   if len(p) else np.zeros(part.shape))
-            return torch.as_tensor(out, dtype=torch.long)
+        if points.device.type == "cpu" and vertices.shape[1] > MATRIX_MAX_CLOUD:  # nearest_index's k-d trees
+            labels = torch.empty(vertices.shape[1], dtype=vertices.dtype)
+            labels[table.flatten()] = torch.arange(table.shape[0], dtype=vertices.dtype).repeat_interleave(table.shape[1])
+            lifted_v = torch.cat([vertices, (PART_SEPARATION * labels)[None, :, None].expand(len(vertices), -1, 1)], -1)
+            return nearest_index(torch.cat([points, PART_SEPARATION * part[..., None].to(points.dtype)], -1), lifted_v)
         cand = table[part]  # (B, K, P)
         d = torch.gather(torch.cdist(points, vertices), 2, cand)  # the full matrix is one GEMM; cheaper than gathering P vertices per point
         return torch.gather(cand, 2, d.argmin(-1, keepdim=True))[..., 0]
