@@ -280,14 +280,14 @@ def _overlaid(repo, *files: str) -> dict:
 
 
 def test_the_default_has_no_extras_and_the_extras_overlay_adds_them_all(repo):
-    """The beyond-paper diagnostics (robust SD, palm SD, ContactGen's gate, ContactGen in SO(3)) are out of the
-    default run: no method is listed for them, no table has their rows or columns; config/extras.yaml adds
-    every one, and keeps Table 1's rows."""
+    """The beyond-paper diagnostics (robust SD, palm SD, ContactGen's gate, ContactGen in SO(3), ContactCVAE near
+    the initial pose) are out of the default run: no method is listed for them, no table has their rows or
+    columns; config/extras.yaml adds every one, and keeps Table 1's rows."""
     default, extras = _overlaid(repo), _overlaid(repo, "config/extras.yaml")
     ev = default["evaluation"]
     assert ev["palm_sd"] is False and ev["robust_sd"]["methods"] == []
-    assert not {"contactgen-gt", "contactgen-so3"} & set(default["methods"])
-    assert not {"table_contactgen_gate", "table_contactgen_rotation"} & set(default["tables"])
+    assert not {"contactgen-gt", "contactgen-so3", "cc-gd-bounded", "m-grasptta-oc-bounded"} & set(default["methods"])
+    assert not {"table_contactgen_gate", "table_contactgen_rotation", "table_contactcvae_rotation"} & set(default["tables"])
     assert not any(EXTRA_COLUMNS & set(t["columns"]) for t in default["tables"].values())
     ev = extras["evaluation"]
     assert ev["palm_sd"] == ["dataset", "ours"] and ev["robust_sd"]["methods"] == ["dataset", "ours"]
@@ -297,6 +297,14 @@ def test_the_default_has_no_extras_and_the_extras_overlay_adds_them_all(repo):
     assert extras["tables"]["table_contactgen_rotation"]["rows"] == ["contactgen", "contactgen-so3"]
     assert extras["components"]["contact_gen_so3"]["training"]["rotation"] == "so3"
     assert default["components"]["contact_gen"]["training"]["rotation"] == "bounded"  # ContactGen's own recipe
+    # ContactCVAE in SO(3) as the paper's OC rows behave (they collide at the initial pose as often as at the
+    # goal); the variant that learns "up" near the initial pose is the extras' row of both OC methods
+    assert default["components"]["contact_cvae"]["training"]["rotation"] == "so3"
+    bounded = extras["components"]["contact_cvae_bounded"]
+    assert bounded["training"]["rotation"] == "bounded" and bounded["network"]["parts"] is False
+    assert {extras["methods"][m]["contact"] for m in ("cc-gd-bounded", "m-grasptta-oc-bounded")} == {"contact_cvae_bounded"}
+    assert extras["tables"]["table_contactcvae_rotation"]["rows"] == [
+        "ours", "cc-gd", "cc-gd-bounded", "m-grasptta-ta", "m-grasptta-oc", "m-grasptta-oc-bounded"]
 
 
 def test_a_grasp_diffuser_without_a_frame_trains_on_the_normalised_vector(repo):
