@@ -36,6 +36,7 @@ from base_commit import commit_label, cpu_name  # noqa: E402
 from tohgs.config import evaluation_sd_settings, load_configs, run_cache_dir  # noqa: E402
 from tohgs.data.predictions import read_predictions  # noqa: E402
 from tohgs.hand import HandAssets  # noqa: E402
+from tohgs.io import atomic_path  # noqa: E402
 from tohgs.metrics.evaluate import evaluate_predictions  # noqa: E402
 from tohgs.metrics.quality_thresholds import QualityThresholds  # noqa: E402
 from tohgs.methods import method_components  # noqa: E402
@@ -92,13 +93,14 @@ def main(argv: list[str] | None = None) -> dict:
                                         HandAssets.load(hand), evaluation_sd_settings(cfg), cfg["metrics"]["voxel_pitch"],
                                         run_cache_dir(cfg, run), progress=True, pv_mesh=ev["pv_mesh"],
                                         sd_hand=ev["sd_hand"])
-            rows.to_parquet(metrics, index=False)
+            with atomic_path(metrics) as tmp:  # a killed call leaves no partial file for the next to reuse
+                rows.to_parquet(tmp, index=False)
         out["tasks"][task] = {"train": summary(pd.read_parquet(metrics), t),
                               "test": summary(pd.read_parquet(test_metrics), t)}
         for split, s in out["tasks"][task].items():
             print(f"{task} {split:5s} " + " ".join(f"{k} {v:.3f}" for k, v in s.items()))
-    a.out.parent.mkdir(parents=True, exist_ok=True)
-    a.out.write_text(json.dumps(out, indent=1) + "\n")
+    with atomic_path(a.out) as tmp:
+        tmp.write_text(json.dumps(out, indent=1) + "\n")
     return out
 
 
