@@ -39,19 +39,18 @@ from tohgs.hand import HandAssets  # noqa: E402
 from tohgs.io import atomic_path  # noqa: E402
 from tohgs.metrics.evaluate import evaluate_predictions  # noqa: E402
 from tohgs.metrics.quality_thresholds import QualityThresholds  # noqa: E402
+from tohgs.metrics.tables import summarize  # noqa: E402
 from tohgs.methods import method_components  # noqa: E402
 from tohgs.methods.predict import predict  # noqa: E402
 
 
 def summary(rows: pd.DataFrame, t: QualityThresholds) -> dict[str, float]:
-    """The numbers of one set of evaluated grasps (its kept ones): grasps, QR %, SD failing %, PV avg cm^3,
-    Init / Goal OPP %, TS."""
+    """The table's numbers of one set of evaluated grasps (:func:`tohgs.metrics.tables.summarize`, of its
+    kept ones: grasps, QR %, PV avg cm^3, Init / Goal OPP %, TS) and the share of them failing SD, %."""
+    row = summarize(rows, t)
     kept = rows[rows.kept]
-    quality = float(t.passes(kept.pv, kept.sd).mean())
-    init, goal = float(kept.init_opp.mean()), float(kept.goal_opp.mean())
-    return {"grasps": int(len(kept)), "qr": 100 * quality, "sd_fail": 100 * float((~(kept.sd < t.max_sd)).mean()),
-            "pv_avg_cm3": 1e6 * float(kept.pv.mean()), "init_opp": 100 * init, "goal_opp": 100 * goal,
-            "ts": quality * (1 - init) * (1 - goal)}
+    return {**{k: row[k] for k in ("grasps", "qr", "pv_avg", "init_opp", "goal_opp", "ts")},
+            "sd_fail": 100 * float((~(kept.sd < t.max_sd)).mean())}
 
 
 def main(argv: list[str] | None = None) -> dict:
