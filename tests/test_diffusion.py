@@ -14,7 +14,8 @@ from helpers import SMALL_PN
 from tohgs.models.contact_diffuser import ContactDiffuser, ContactDiffuserConfig
 from tohgs.models.diffusion import DiffusionConfig, NoiseSchedule, sample, timestep_embedding
 from tohgs.geometry.hand_object import contact_values, vertex_normals
-from tohgs.models.grasp_diffuser import GraspCondition, GraspDiffuser, GraspDiffuserConfig, grasp_losses
+from tohgs.models.grasp_diffuser import (GraspCondition, GraspDiffuser, GraspDiffuserConfig, grasp_losses,
+                                        weighted_terms)
 from tohgs.data.batch import Batch
 from tohgs.models.train import EMA, cosine_with_warmup
 
@@ -250,6 +251,20 @@ def test_grasp_losses_vanish_for_the_truth_and_grow_with_error(hand):
     half = GraspCondition(cond.glob, None, cond.rotation, cond.origin, pts[:, ::2])
     off_half = grasp_losses(model, hand, model.normalise(shifted), x0, half, contact[:, ::2], 100.0)
     assert off_half["cons"] == pytest.approx(off["cons"], rel=0.3)
+
+
+def test_recon_clamp_caps_each_samples_reconstruction_term_and_0_leaves_it_whole():
+    terms = {k: torch.tensor(v) for k, v in dict(diff=[1.0, 1.0], recon=[0.5, 4.0], pen=[0.2, 3.0],
+                                                 cons=[1.0, 2.0]).items()}
+    weights = (15.0, 2.0, 5.0, 0.002)
+    official = weighted_terms(terms, weights)  # the official clamp at 1 (per sample)
+    assert official["recon"] == pytest.approx(2.0 * (0.5 + 1.0) / 2)
+    assert weighted_terms(terms, weights, 0.0)["recon"] == pytest.approx(2.0 * (0.5 + 4.0) / 2)
+    assert weighted_terms(terms, weights, 2.0)["recon"] == pytest.approx(2.0 * (0.5 + 2.0) / 2)
+    # the other terms do not depend on it: L_pen keeps its clamp at 1
+    assert weighted_terms(terms, weights, 0.0)["pen"] == pytest.approx(5.0 * (0.2 + 1.0) / 2)
+    with pytest.raises(ValueError, match="recon_clamp"):
+        GraspDiffuserConfig(recon_clamp=-1.0)
 
 
 def test_the_contact_frame_turns_about_z_and_grasps_go_there_and_back(hand):

@@ -43,7 +43,10 @@ against 0.46 without it; docs/graspdiffuser.md), so the default is the official 
 
 Losses (REFERENCE.md, official code), per sample then averaged over the batch:
 
-``L = w_diff L_diff + w_recon mean_b min(L_recon, 1) + w_pen mean_b min(L_pen, 1) + w_cons mean_b L_cons``
+``L = w_diff L_diff + w_recon mean_b min(L_recon, r) + w_pen mean_b min(L_pen, 1) + w_cons mean_b L_cons``
+
+(r, ``recon_clamp``: the official code's 1 by default, reached at a 3.6 cm RMS vertex error, beyond which a
+sample's L_recon gives no gradient; 0 leaves it unclamped)
 
 - ``L_diff``: squared error of the normalised vector, summed over its numbers (``diff_units: normalised``),
   or of the vector in its own units, m and rad (``official``: the official code's sum-MSE of the raw numbers,
@@ -114,6 +117,7 @@ class GraspDiffuserConfig:
     contact_power: float = 2.0  # the contact frame's weights are c ** contact_power
     origin: str = "centroid"  # the canonical frame's origin: the contact centroid or the object point nearest it
     diff_units: str = "official"  # L_diff in the vector's own units (m, rad), or "normalised": on the normalised one
+    recon_clamp: float = 1.0  # L_recon enters as min(L_recon, recon_clamp) per sample (m^2; 0: unclamped)
     encoder: str = "pointnet"  # or "pointnet2": PointNet++ of sizes ``pointnet`` (the paper's)
     representation: str = "palm_rot6d"  # or "axis_angle": the 51 numbers (the paper's)
     contact_features: bool = True  # the contact region's moments added to the pooled condition
@@ -141,6 +145,8 @@ class GraspDiffuserConfig:
         if not self.contact_input and (self.frame != "network" or self.contact_features):
             raise ValueError("a GraspDiffuser without contact_input reads no map: it needs frame 'network' and "
                              "contact_features false")
+        if self.recon_clamp < 0:
+            raise ValueError(f"GraspDiffuser recon_clamp must be >= 0 (0: unclamped), not {self.recon_clamp}")
         if self.d_model % self.n_heads:
             raise ValueError(f"GraspDiffuser d_model {self.d_model} is not a multiple of n_heads {self.n_heads}")
 
@@ -370,7 +376,7 @@ class GraspDiffuser(Component):
             x0_hat = self(x_t, t, cond)
         terms = grasp_losses(self, self._training["hand"], x0_hat, x0, cond, batch.contact,
                              self._training["alpha_contact"])
-        weighted = weighted_terms(terms, self._training["weights"])
+        weighted = weighted_terms(terms, self._training["weights"], self.cfg.recon_clamp)
         return {"loss": sum(weighted.values()), **{k: v.mean() for k, v in terms.items()},
                 **{f"w_{k}": v for k, v in weighted.items()}}
 
@@ -526,11 +532,14 @@ def grasp_losses(model: GraspDiffuser, hand: HandModel, x0_hat: torch.Tensor, x0
     return {"diff": l_diff, **hand_object_terms(points, pred_v, true_v, contact, hand.closed_faces, alpha_contact)}
 
 
-def weighted_terms(terms: dict[str, torch.Tensor], weights: tuple[float, float, float, float]) -> dict[str, torch.Tensor]:
-    """Each term's contribution to the loss (scalars): ``w_diff mean L_diff``, ``w_recon mean min(L_recon, 1)``,
-    ``w_pen mean min(L_pen, 1)``, ``w_cons mean L_cons`` (clamps per sample)."""
+def weighted_terms(terms: dict[str, torch.Tensor], weights: tuple[float, float, float, float],
+                   recon_clamp: float = 1.0) -> dict[str, torch.Tensor]:
+    """Each term's contribution to the loss (scalars): ``w_diff mean L_diff``, ``w_recon mean min(L_recon,
+    recon_clamp)`` (no clamp where ``recon_clamp`` is 0), ``w_pen mean min(L_pen, 1)``, ``w_cons mean L_cons``
+    (clamps per sample)."""
     w_diff, w_recon, w_pen, w_cons = weights
-    return {"diff": w_diff * terms["diff"].mean(), "recon": w_recon * terms["recon"].clamp(max=1.0).mean(),
+    recon = terms["recon"] if recon_clamp == 0 else terms["recon"].clamp(max=recon_clamp)
+    return {"diff": w_diff * terms["diff"].mean(), "recon": w_recon * recon.mean(),
             **weighted_pen_cons(terms, w_pen, w_cons)}
 
 
