@@ -10,7 +10,8 @@ grasp, the GraspDiffuser should put the hand where that grasp is. This measures 
   of hands turned by more than 90 degrees from it. The same for an untrained copy of the network (its
   normaliser and hand set as the trained one's, its weights fresh: what reading nothing gives) and, as the
   scale of "a different grasp", the mean vertex error to the nearest *other* task grasp of the same
-  configuration. Each checkpoint of ``--models`` (``name=path``) is measured beside the run's;
+  configuration. Each checkpoint of ``--models`` (``name=path``) is measured beside the run's on the task it
+  was trained for;
 - **where the scene collisions come from**: on the run's test predictions, the ``dataset`` row (each
   configuration's ground-truth grasps) against ``--method`` (default ``ours-gt-contact``: the GraspDiffuser on
   those grasps' own maps, sample for sample, :func:`tohgs.methods.base.ground_truth_pick`), each grasp's
@@ -46,7 +47,7 @@ from tohgs.data.predictions import read_predictions  # noqa: E402
 from tohgs.hand import HandAssets, HandModel  # noqa: E402
 from tohgs.hand.assets import rotvec_to_matrix  # noqa: E402
 from tohgs.io import atomic_path  # noqa: E402
-from tohgs.models.checkpoint import load_component  # noqa: E402
+from tohgs.models.checkpoint import load_checkpoint, load_component  # noqa: E402
 from tohgs.models.component import build_component  # noqa: E402
 
 TURNED_DEG = 90.0  # a hand turned by more than this from its map's grasp counts as turned
@@ -142,17 +143,21 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks/results/map_fidelity.json")
     a = ap.parse_args(argv)
     torch.set_num_threads(2)
+    extra = {}
+    for spec in a.models:
+        name, _, path = spec.partition("=")
+        if not path:
+            raise SystemExit(f"--models {spec!r}: expected name=path")
+        extra[name] = Path(path)
     hand = HandModel(HandAssets.load(a.results / "hand/hand.npz"))
     out: dict = {"commit": commit_label(), "cpu": cpu_name(), "sampler": a.sampler, "steps": a.steps,
                  "items": a.items, "turned_deg": TURNED_DEG, "tasks": {}}
     for task in a.tasks:
         run_model, _ = load_component(a.results / f"models/{task}/{a.component}.pt", task=task)
         models = {"run": run_model, "untrained": untrained_copy(run_model)}
-        for spec in a.models:
-            name, _, path = spec.partition("=")
-            if not path:
-                raise SystemExit(f"--models {spec!r}: expected name=path")
-            models[name] = load_component(path, task=task)[0]
+        for name, path in extra.items():  # each on the task it was trained for
+            if load_checkpoint(path).get("task") == task:
+                models[name] = load_component(path, task=task)[0]
         res: dict = {}
         for split in ("train", "test"):
             data = MapDataset(sorted((a.results / f"maps/{task}/{split}").glob("shard-*.zarr")), per="grasp")
