@@ -45,19 +45,19 @@ from tohgs.data.batch import Batch  # noqa: E402
 from tohgs.data.maps import MapDataset  # noqa: E402
 from tohgs.data.predictions import read_predictions  # noqa: E402
 from tohgs.hand import HandAssets, HandModel  # noqa: E402
-from tohgs.hand.assets import rotvec_to_matrix  # noqa: E402
+from tohgs.hand.rotations import axis_angle_to_matrix, rotation_angle  # noqa: E402
 from tohgs.io import atomic_path  # noqa: E402
-from tohgs.models.checkpoint import load_checkpoint, load_component  # noqa: E402
+from tohgs.models.checkpoint import load_component  # noqa: E402
 from tohgs.models.component import build_component  # noqa: E402
 
 TURNED_DEG = 90.0  # a hand turned by more than this from its map's grasp counts as turned
 
 
-def rotation_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(S,) the angle between the global rotations of (S, 51) grasps ``a`` and ``b``, degrees."""
-    ra, rb = rotvec_to_matrix(a[:, 3:6]), rotvec_to_matrix(b[:, 3:6])
-    cos = (np.einsum("sij,sij->s", ra, rb) - 1) / 2
-    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+def grasp_angle(a, b) -> np.ndarray:
+    """(S,) the angle between the global rotations of (S, 51) grasps ``a`` and ``b`` (arrays or tensors),
+    degrees."""
+    a, b = (torch.as_tensor(np.asarray(x), dtype=torch.float64) for x in (a, b))
+    return np.degrees(rotation_angle(axis_angle_to_matrix(a[:, 3:6]), axis_angle_to_matrix(b[:, 3:6])).numpy())
 
 
 def untrained_copy(model):
@@ -71,27 +71,28 @@ def untrained_copy(model):
     return fresh.eval()
 
 
-def fidelity(model, hand: HandModel, data: MapDataset, items: int, sampler: str, steps: int, seed: int) -> dict:
-    """Errors of one grasp sampled per ground-truth map of ``items`` task grasps of ``data`` (module
-    docstring), and the nearest other grasp of each one's configuration."""
-    idx = np.random.default_rng(seed).choice(len(data), min(items, len(data)), replace=False)
-    batch = Batch.collate([data[i] for i in idx])
+def pick_items(data: MapDataset, items: int, seed: int) -> np.ndarray:
+    """``items`` task grasps of ``data`` (all where it has fewer), drawn without replacement from ``seed``."""
+    return np.random.default_rng(seed).choice(len(data), min(items, len(data)), replace=False)
+
+
+def fidelity(model, hand: HandModel, batch: Batch, sampler: str, steps: int, seed: int) -> dict:
+    """Errors of one grasp sampled per ground-truth map of the ``batch``'s task grasps (module docstring)."""
     with torch.no_grad():
         pred = model.sample_grasps(batch, sampler, steps, torch.Generator().manual_seed(seed))
         vp, vt = hand(pred).vertices, hand(batch.grasp).vertices
     palm = torch.as_tensor(hand.assets.palm_ids)
     palm_err = ((vp[:, palm].mean(1) - vt[:, palm].mean(1)).norm(dim=-1) * 100).numpy()
     vert_err = ((vp - vt).norm(dim=-1).mean(1) * 100).numpy()
-    angle = rotation_angle(pred.numpy().astype(np.float64), batch.grasp.numpy().astype(np.float64))
-    return {"items": len(idx), "palm_cm_median": float(np.median(palm_err)),
+    angle = grasp_angle(pred, batch.grasp)
+    return {"items": batch.size, "palm_cm_median": float(np.median(palm_err)),
             "vertex_cm_median": float(np.median(vert_err)), "vertex_cm_mean": float(vert_err.mean()),
             "angle_deg_median": float(np.median(angle)), "turned_pct": float(100 * (angle > TURNED_DEG).mean())}
 
 
-def nearest_other(hand: HandModel, data: MapDataset, items: int, seed: int) -> float:
-    """Median over the same ``items`` task grasps of the mean vertex error (cm) to the nearest other task
+def nearest_other(hand: HandModel, data: MapDataset, idx: np.ndarray) -> float:
+    """Median over the task grasps ``idx`` of ``data`` of the mean vertex error (cm) to the nearest other task
     grasp of its configuration (those with one)."""
-    idx = np.random.default_rng(seed).choice(len(data), min(items, len(data)), replace=False)
     out = []
     with torch.no_grad():
         for i in idx:
@@ -110,17 +111,16 @@ def collisions(results: Path, task: str, method: str) -> dict:
     """Init OPP of ``method``'s test grasps turned by more than :data:`TURNED_DEG` from their map's grasp
     (the ``dataset`` row's, sample for sample) and of the others (module docstring)."""
     truth, _ = read_predictions(results / f"predictions/{task}/dataset.zarr")
-    pred, _ = read_predictions(results / f"predictions/{task}/{method}.zarr")
+    pred, attrs = read_predictions(results / f"predictions/{task}/{method}.zarr")
     if not (np.array_equal(truth["object_id"], pred["object_id"])
             and np.array_equal(truth["config_index"], pred["config_index"])):
         raise SystemExit(f"{task}: the dataset and {method} predictions are not of the same configurations")
     rows = pd.read_parquet(results / f"metrics/{task}/{method}.parquet")
-    vocab = list(read_predictions(results / f"predictions/{task}/{method}.zarr")[1]["objects"])
+    vocab = list(attrs["objects"])
     keys = pd.DataFrame({"object": np.repeat([vocab[int(o)] for o in pred["object_id"]], pred["kept"].shape[1]),
                          "config_index": np.repeat(pred["config_index"], pred["kept"].shape[1]),
                          "sample": np.tile(np.arange(pred["kept"].shape[1]), len(pred["object_id"]))})
-    keys["angle"] = rotation_angle(pred["grasp_init"].reshape(-1, 51).astype(np.float64),
-                                   truth["grasp_init"].reshape(-1, 51).astype(np.float64))
+    keys["angle"] = grasp_angle(pred["grasp_init"].reshape(-1, 51), truth["grasp_init"].reshape(-1, 51))
     m = keys.merge(rows[["object", "config_index", "sample", "init_opp"]], on=["object", "config_index", "sample"])
     turned = m.angle > TURNED_DEG
     return {"grasps": len(m), "turned_pct": float(100 * turned.mean()),
@@ -143,26 +143,27 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks/results/map_fidelity.json")
     a = ap.parse_args(argv)
     torch.set_num_threads(2)
-    extra = {}
+    extra = {}  # name -> (model, the task it was trained for)
     for spec in a.models:
         name, _, path = spec.partition("=")
         if not path:
             raise SystemExit(f"--models {spec!r}: expected name=path")
-        extra[name] = Path(path)
+        model, ckpt = load_component(path)
+        extra[name] = (model, ckpt["task"])
     hand = HandModel(HandAssets.load(a.results / "hand/hand.npz"))
     out: dict = {"commit": commit_label(), "cpu": cpu_name(), "sampler": a.sampler, "steps": a.steps,
                  "items": a.items, "turned_deg": TURNED_DEG, "tasks": {}}
     for task in a.tasks:
         run_model, _ = load_component(a.results / f"models/{task}/{a.component}.pt", task=task)
         models = {"run": run_model, "untrained": untrained_copy(run_model)}
-        for name, path in extra.items():  # each on the task it was trained for
-            if load_checkpoint(path).get("task") == task:
-                models[name] = load_component(path, task=task)[0]
+        models.update({name: model for name, (model, trained) in extra.items() if trained == task})
         res: dict = {}
         for split in ("train", "test"):
             data = MapDataset(sorted((a.results / f"maps/{task}/{split}").glob("shard-*.zarr")), per="grasp")
-            res[split] = {name: fidelity(m, hand, data, a.items, a.sampler, a.steps, a.seed) for name, m in models.items()}
-            res[split]["nearest_other_vertex_cm_median"] = nearest_other(hand, data, a.items, a.seed)
+            idx = pick_items(data, a.items, a.seed)
+            batch = Batch.collate([data[i] for i in idx])
+            res[split] = {name: fidelity(m, hand, batch, a.sampler, a.steps, a.seed) for name, m in models.items()}
+            res[split]["nearest_other_vertex_cm_median"] = nearest_other(hand, data, idx)
             for name in models:
                 f = res[split][name]
                 print(f"{task} {split:5s} {name:10s} palm {f['palm_cm_median']:5.2f} cm  vertices "

@@ -24,6 +24,12 @@ def axis_angle_to_matrix(aa: torch.Tensor) -> torch.Tensor:
     return eye + a[..., None] * k + b[..., None] * (k @ k)
 
 
+def rotation_angle(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """(...) the angles (radians) between (..., 3, 3) rotation matrices ``a`` and ``b``."""
+    cos = ((a.transpose(-1, -2) @ b).diagonal(dim1=-2, dim2=-1).sum(-1) - 1) / 2
+    return torch.arccos(cos.clamp(-1.0, 1.0))
+
+
 def matrix_to_axis_angle(r: torch.Tensor) -> torch.Tensor:
     """(..., 3, 3) rotation matrices -> (..., 3) axis-angle, angle in [0, pi] (via quaternions)."""
     q = matrix_to_quaternion(r)

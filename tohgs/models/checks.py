@@ -39,7 +39,7 @@ import torch
 from tohgs.data.maps import MapDataset
 from tohgs.geometry.neighbours import nearest_neighbours
 from tohgs.hand.model import HandModel
-from tohgs.hand.rotations import axis_angle_to_matrix
+from tohgs.hand.rotations import axis_angle_to_matrix, rotation_angle
 from tohgs.data.batch import Batch
 from tohgs.models.checkpoint import load_component
 from tohgs.models.diffusion import sample
@@ -121,12 +121,6 @@ def shuffled_condition_gap(model, data: MapDataset, n_samples: int = 256, seed: 
     return out
 
 
-def _rotation_angle(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """Angles (radians) between rotation matrices (..., 3, 3)."""
-    cos = ((a.transpose(-1, -2) @ b).diagonal(dim1=-2, dim2=-1).sum(-1) - 1) / 2
-    return torch.arccos(cos.clamp(-1.0, 1.0))
-
-
 @torch.no_grad()
 def grasp_fit(model, hand: HandModel, data: MapDataset, max_configs: int = 24, samples: int = 4, steps: int = 20,
               sampler: str = "ddim", touch: float = 0.005, seed: int = 0) -> dict:
@@ -172,8 +166,8 @@ def grasp_fit(model, hand: HandModel, data: MapDataset, max_configs: int = 24, s
             dist = torch.cdist(pred[:, :3] + wrist0, true[:, :3] + wrist0)  # (S, G) wrist to wrist
             best = dist.argmin(-1)
             stats[key]["wrist"] += dist.min(-1).values.tolist()
-            stats[key]["rotation"] += torch.rad2deg(_rotation_angle(axis_angle_to_matrix(pred[:, 3:6]),
-                                                                     axis_angle_to_matrix(true[best, 3:6]))).tolist()
+            stats[key]["rotation"] += torch.rad2deg(rotation_angle(axis_angle_to_matrix(pred[:, 3:6]),
+                                                                    axis_angle_to_matrix(true[best, 3:6]))).tolist()
 
     def summary(v: dict[str, list]) -> dict:
         if not v["wrist"]:
