@@ -16,12 +16,20 @@ grasp, the GraspDiffuser should put the hand where that grasp is. This measures 
   configuration's ground-truth grasps) against ``--method`` (default ``ours-gt-contact``: the GraspDiffuser on
   those grasps' own maps, sample for sample, :func:`tohgs.methods.base.ground_truth_pick`), each grasp's
   rotation angle from its map's grasp and its Init OPP (the metrics parquet): the mean Init OPP of the hands
-  turned by more than 90 degrees and of the others, and the turned hands' share of the row's Init OPP.
+  turned by more than 90 degrees and of the others, and the turned hands' share of the row's Init OPP;
+- **what a map says of the hand's direction**: how alike (the cosine of the mean-centred maps) each
+  sampled hand's own contact map is to the map it was given, for the turned hands and the others; the
+  same of the map's own grasp turned by 180 degrees about its palm normal through its palm centre (what a
+  map says when nothing else changes); and, per split, for each distinct grasp (object and prior grasp) of
+  the shards, the other grasp of the same object whose map is most alike (the configurations' clouds are
+  one sample of the object, index for index, so maps of two configurations compare point for point, the
+  hands after aligning the clouds): how alike, and how often that twin is turned by more than 90 degrees.
 
     python benchmarks/map_fidelity.py --results results --tasks placing [--items 160] \\
         [--models unclamped=/path/to/grasp_diffuser.pt] [--out benchmarks/results/map_fidelity.json]
 
-About 20 s per task and checkpoint on 2 cores (DDPM 1000 over 2 x 160 maps in one batch).
+About 20 s per task and checkpoint on 2 cores (DDPM 1000 over 2 x 160 maps in one batch), and about as much
+per task for the twins.
 """
 
 from __future__ import annotations
@@ -45,12 +53,15 @@ from tohgs.data.batch import Batch  # noqa: E402
 from tohgs.data.maps import MapDataset  # noqa: E402
 from tohgs.data.predictions import read_predictions  # noqa: E402
 from tohgs.hand import HandAssets, HandModel  # noqa: E402
+from tohgs.geometry.hand_object import contact_values  # noqa: E402
+from tohgs.hand.assets import rotvec_to_matrix  # noqa: E402
 from tohgs.hand.rotations import axis_angle_to_matrix, rotation_angle  # noqa: E402
 from tohgs.io import atomic_path  # noqa: E402
 from tohgs.models.checkpoint import load_component  # noqa: E402
 from tohgs.models.component import build_component  # noqa: E402
 
 TURNED_DEG = 90.0  # a hand turned by more than this from its map's grasp counts as turned
+TWIN_ALIKE = 0.8  # a twin map at least this alike (centred cosine) to a grasp's own counts as near-identical
 
 
 def grasp_angle(a, b) -> np.ndarray:
@@ -76,18 +87,90 @@ def pick_items(data: MapDataset, items: int, seed: int) -> np.ndarray:
     return np.random.default_rng(seed).choice(len(data), min(items, len(data)), replace=False)
 
 
-def fidelity(model, hand: HandModel, batch: Batch, sampler: str, steps: int, seed: int) -> dict:
-    """Errors of one grasp sampled per ground-truth map of the ``batch``'s task grasps (module docstring)."""
+def map_alike(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """(B,) the cosine of the mean-centred (B, N) maps ``a`` and ``b``: 1 for the same map, about 0 for
+    unrelated ones (scale-free, so a map's long tail does not dominate)."""
+    a, b = a - a.mean(-1, keepdim=True), b - b.mean(-1, keepdim=True)
+    return (a * b).sum(-1) / (a.norm(dim=-1) * b.norm(dim=-1)).clamp_min(1e-12)
+
+
+def hand_map(hand: HandModel, vertices: torch.Tensor, batch: Batch, alpha: float) -> torch.Tensor:
+    """(B, N) the contact map (the shards' definition) of (B, V, 3) hand ``vertices`` on the batch's points."""
+    return contact_values(batch.points, vertices.to(batch.points), alpha)[0]
+
+
+def fidelity(model, hand: HandModel, batch: Batch, sampler: str, steps: int, seed: int, alpha: float) -> dict:
+    """Errors of one grasp sampled per ground-truth map of the ``batch``'s task grasps, and how alike each
+    sampled hand's own map is to the one it was given, turned hands and others (module docstring)."""
     with torch.no_grad():
         pred = model.sample_grasps(batch, sampler, steps, torch.Generator().manual_seed(seed))
         vp, vt = hand(pred).vertices, hand(batch.grasp).vertices
+        alike = map_alike(hand_map(hand, vp, batch, alpha), batch.contact).numpy()
     palm = torch.as_tensor(hand.assets.palm_ids)
     palm_err = ((vp[:, palm].mean(1) - vt[:, palm].mean(1)).norm(dim=-1) * 100).numpy()
     vert_err = ((vp - vt).norm(dim=-1).mean(1) * 100).numpy()
     angle = grasp_angle(pred, batch.grasp)
+    turned = angle > TURNED_DEG
     return {"items": batch.size, "palm_cm_median": float(np.median(palm_err)),
             "vertex_cm_median": float(np.median(vert_err)), "vertex_cm_mean": float(vert_err.mean()),
-            "angle_deg_median": float(np.median(angle)), "turned_pct": float(100 * (angle > TURNED_DEG).mean())}
+            "angle_deg_median": float(np.median(angle)), "turned_pct": float(100 * turned.mean()),
+            "map_alike_turned_median": float(np.median(alike[turned])) if turned.any() else float("nan"),
+            "map_alike_other_median": float(np.median(alike[~turned])) if (~turned).any() else float("nan")}
+
+
+def turned_own_map(hand: HandModel, batch: Batch, alpha: float, degrees: float = 180.0) -> float:
+    """Median over the batch's task grasps of how alike the map of the grasp turned by ``degrees`` about
+    its palm normal (through its palm centre; the rest palm's plane normal carried by the grasp's global
+    rotation) is to the grasp's own map."""
+    palm = torch.as_tensor(hand.assets.palm_ids)
+    rest = hand.rest_vertices[palm].double()
+    normal_rest = torch.linalg.svd(rest - rest.mean(0)).Vh[-1]
+    with torch.no_grad():
+        v = hand(batch.grasp).vertices.double()
+        normal = axis_angle_to_matrix(batch.grasp[:, 3:6].double()) @ normal_rest
+        centre = v[:, palm].mean(1, keepdim=True)
+        turn = axis_angle_to_matrix(normal * np.radians(degrees))
+        turned = centre + (v - centre) @ turn.transpose(1, 2)
+        return float(map_alike(hand_map(hand, turned, batch, alpha), batch.contact).median())
+
+
+def kabsch(target: np.ndarray, source: np.ndarray) -> np.ndarray:
+    """(3, 3) the rotation R minimising |R (source - mean) - (target - mean)| of two index-aligned (N, 3)
+    clouds."""
+    h = (source - source.mean(0)).T @ (target - target.mean(0))
+    u, _, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(vt.T @ u.T))
+    return vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+
+
+def map_twins(data: MapDataset) -> dict:
+    """Per distinct grasp (object and prior grasp) of ``data``, the other distinct grasp of the same object
+    whose map is most alike (:func:`map_alike` on the index-aligned clouds): the median likeness, the share
+    of grasps with a twin at least :data:`TWIN_ALIKE` alike, and the share of those twins turned by more
+    than :data:`TURNED_DEG` (the two hands compared after :func:`kabsch` aligns their configurations'
+    clouds)."""
+    alike, angle = [], []
+    for sh in data.shards:
+        owner = sh.object_id[sh.grasp_config]
+        for obj in np.unique(owner):
+            rows = np.flatnonzero(owner == obj)
+            rows = rows[np.unique(sh.grasp_prior_index[rows], return_index=True)[1]]
+            if len(rows) < 2:
+                continue
+            maps = torch.as_tensor(np.stack([sh.contact[r] for r in rows]), dtype=torch.float64)
+            sim = map_alike(maps[:, None], maps[None]).numpy()
+            np.fill_diagonal(sim, -np.inf)
+            rot = rotvec_to_matrix(np.stack([sh.grasp[r][3:6] for r in rows]).astype(np.float64))
+            clouds = [sh.points[sh.grasp_config[r]].astype(np.float64) for r in rows]
+            for k, twin in enumerate(sim.argmax(1)):
+                rel = rot[k].T @ kabsch(clouds[k], clouds[twin]) @ rot[twin]
+                alike.append(sim[k, twin])
+                angle.append(np.degrees(np.arccos(np.clip((np.trace(rel) - 1) / 2, -1.0, 1.0))))
+    alike, angle = np.asarray(alike), np.asarray(angle)
+    near = alike >= TWIN_ALIKE
+    return {"grasps": len(alike), "twin_alike_median": float(np.median(alike)) if len(alike) else float("nan"),
+            "near_identical_twin_pct": float(100 * near.mean()) if len(alike) else float("nan"),
+            "near_identical_twin_turned_pct": float(100 * (angle[near] > TURNED_DEG).mean()) if near.any() else float("nan")}
 
 
 def nearest_other(hand: HandModel, data: MapDataset, idx: np.ndarray) -> float:
@@ -162,15 +245,21 @@ def main(argv: list[str] | None = None) -> dict:
             data = MapDataset(sorted((a.results / f"maps/{task}/{split}").glob("shard-*.zarr")), per="grasp")
             idx = pick_items(data, a.items, a.seed)
             batch = Batch.collate([data[i] for i in idx])
-            res[split] = {name: fidelity(m, hand, batch, a.sampler, a.steps, a.seed) for name, m in models.items()}
+            alpha = data.shards[0].alpha_contact
+            res[split] = {name: fidelity(m, hand, batch, a.sampler, a.steps, a.seed, alpha) for name, m in models.items()}
             res[split]["nearest_other_vertex_cm_median"] = nearest_other(hand, data, idx)
+            res[split]["own_grasp_turned_180_map_alike_median"] = turned_own_map(hand, batch, alpha)
+            res[split]["twins"] = map_twins(data)
             for name in models:
                 f = res[split][name]
                 print(f"{task} {split:5s} {name:10s} palm {f['palm_cm_median']:5.2f} cm  vertices "
                       f"{f['vertex_cm_median']:5.2f} cm  angle {f['angle_deg_median']:5.1f} deg  turned "
-                      f"{f['turned_pct']:4.1f} %")
+                      f"{f['turned_pct']:4.1f} %  its map alike {f['map_alike_other_median']:.2f} (turned "
+                      f"{f['map_alike_turned_median']:.2f})")
             print(f"{task} {split:5s} nearest other grasp of the configuration: "
-                  f"{res[split]['nearest_other_vertex_cm_median']:.2f} cm")
+                  f"{res[split]['nearest_other_vertex_cm_median']:.2f} cm; the map's own grasp turned 180 deg: "
+                  f"alike {res[split]['own_grasp_turned_180_map_alike_median']:.2f}; twins: "
+                  + " ".join(f"{k} {v:.2f}" for k, v in res[split]["twins"].items()))
         if (a.results / f"metrics/{task}/{a.method}.parquet").exists():
             res["collisions"] = collisions(a.results, task, a.method)
             print(f"{task} {a.method}: " + " ".join(f"{k} {v:.2f}" for k, v in res["collisions"].items()))
