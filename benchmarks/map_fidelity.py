@@ -28,8 +28,7 @@ grasp, the GraspDiffuser should put the hand where that grasp is. This measures 
     python benchmarks/map_fidelity.py --results results --tasks placing [--items 160] \\
         [--models unclamped=/path/to/grasp_diffuser.pt] [--out benchmarks/results/map_fidelity.json]
 
-About 20 s per task and checkpoint on 2 cores (DDPM 1000 over 2 x 160 maps in one batch), and about as much
-per task for the twins.
+About 20 s per task and checkpoint on 2 cores (DDPM 1000 over 2 x 160 maps in one batch); the twins about 1 s.
 """
 
 from __future__ import annotations
