@@ -316,6 +316,17 @@ def job_settings(cfg: Mapping[str, Any], name: str, schema: Mapping[str, Any] | 
     return out
 
 
+def job_network(component: Mapping[str, Any], schema: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The network settings a training job of ``component`` (a validated config's block) is given: its
+    ``network`` with the defaults filled in, less each key its kind's schema marks ``x-optional`` while it is
+    at its default (a setting added later, off by default, leaves the trainings of before it as they were:
+    Snakemake compares the params)."""
+    schema = load_schema() if schema is None else schema
+    props = schema["$defs"]["networks"][component["kind"]].get("properties", {})
+    return {k: v for k, v in component["network"].items()
+            if not (props.get(k, {}).get("x-optional") and v == props[k].get("default"))}
+
+
 def _components_methods_tables(cfg: dict[str, Any], schema: Mapping[str, Any]) -> None:
     """Fill each component's network defaults from its kind and check what the named blocks refer to: a
     component's kind and overlays, each method's kind and the components it names (by role), each table's

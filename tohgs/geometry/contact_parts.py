@@ -24,8 +24,8 @@ from dataclasses import dataclass
 
 import torch
 
-from tohgs.geometry.hand_object import contact_values
-from tohgs.hand.layout import N_JOINTS
+from tohgs.geometry.hand_object import contact_values, nearest_vertex
+from tohgs.hand.layout import FINGERS, N_JOINTS
 
 N_PARTS = N_JOINTS  # one part per MANO joint (16)
 
@@ -67,3 +67,16 @@ def directions_to_world(part: torch.Tensor, direction: torch.Tensor, rotations: 
     hands with (B, 16, 3, 3) global joint ``rotations``."""
     rot = torch.gather(rotations, 1, part[..., None, None].expand(-1, -1, 3, 3))
     return _unit((rot @ direction[..., None])[..., 0])
+
+
+def thumb_signed(contact: torch.Tensor, points: torch.Tensor, vertices: torch.Tensor, part_labels: torch.Tensor
+                 ) -> torch.Tensor:
+    """(B, N) the contact map ``contact`` (B, N, in [0, 1]) of (B, N, 3) object points made negative where the
+    nearest of the (B, V, 3) hand ``vertices`` belongs to the thumb (its ``part_labels`` (V,) one of the thumb's
+    joints, as :func:`part_contact` assigns parts): the map with a two-part label, in [-1, 1]. A scalar map
+    says where the hand touches, not with what; its grasp turned about the palm's normal touches nearly the
+    same points (docs/graspdiffuser.md), and the thumb's contact tells the two apart. No gradient."""
+    with torch.no_grad():
+        _, idx = nearest_vertex(points, vertices)
+        thumb = torch.isin(part_labels, torch.as_tensor(FINGERS["thumb"], device=part_labels.device))
+        return torch.where(thumb[idx], -contact, contact)

@@ -11,6 +11,7 @@ import torch
 
 from tohgs.data.batch import Batch
 from tohgs.data.maps import MapShard
+from tohgs.geometry.contact_parts import thumb_signed
 from tohgs.geometry.neighbours import nearest_neighbours
 from tohgs.methods import GROUND_TRUTH, NO_CONTACT
 from tohgs.settings import build_blocks
@@ -167,20 +168,30 @@ class ContactSource:
         """Whether there are maps (the source is not ``none``)."""
         return self.name != NO_CONTACT
 
-    def maps(self, batch: Batch, shard: MapShard, row: int, generator: torch.Generator, **extra: Any
+    def maps(self, batch: Batch, shard: MapShard, row: int, generator: torch.Generator, signed_by=None, **extra: Any
              ) -> torch.Tensor | None:
         """(B, N) contact maps in [0, 1] for ``batch`` (B copies of configuration ``row`` of ``shard``): the
         component's, sampled with the method's sampler from ``generator`` (``extra``: its guidance arguments);
         the configuration's ground truth cycled to B (an empty (0, N) tensor where it has no task grasp); None
-        for ``none``."""
+        for ``none``. ``signed_by`` (a hand model; ground truth only): each map signed by its grasp's thumb,
+        in [-1, 1] (:func:`tohgs.geometry.contact_parts.thumb_signed`), for a grasp model that reads them."""
         if not self.reads_maps:
             return None
         s = self.method.settings
         if self.model is not None:
+            if signed_by is not None:
+                raise ValueError(f"contact {self.name!r} samples maps without the thumb's sign; only the ground "
+                                 "truth's grasps sign them")
             contact = self.model.sample_contact(batch, s.sampler, s.steps, generator, **extra)
             return smooth_contact(batch.points[0], contact, s.contact_smoothing)
         ids = self.method.ground_truth(shard, row, batch.size)
-        return torch.as_tensor(shard.contact[ids], device=batch.device)
+        contact = torch.as_tensor(shard.contact[ids], device=batch.device)
+        if signed_by is not None and len(ids):
+            grasp = torch.as_tensor(shard.grasp[ids], dtype=batch.points.dtype, device=batch.device)
+            with torch.no_grad():
+                vertices = signed_by(grasp).vertices
+            contact = thumb_signed(contact, batch.points, vertices, signed_by.part_labels)
+        return contact
 
 
 def gt_rows(shard: MapShard, row: int) -> np.ndarray:

@@ -11,7 +11,9 @@ the object (the map shards' contact map, at their ``alpha_contact``). With ``set
 paper) the grasp generator's sampling is guided out of the scene at both poses, the contact diffuser's off the
 object points near the scene, and more grasps may be sampled than kept: the best by the same energy, picked
 for diversity (:mod:`tohgs.models.guidance`; the stored ``seconds`` gain ``select``, the diagnostics the
-candidates' and the kept grasps' mean energy).
+candidates' and the kept grasps' mean energy). A grasp model that reads maps signed by the thumb's contact
+(a GraspDiffuser with ``thumb_sign``, beyond the paper) is given the ground truth's maps signed by their own
+grasps; the stored maps are the unsigned ones.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import torch
 
 from tohgs.geometry.cloud import even_subset
 from tohgs.geometry.hand_object import contact_values
+from tohgs.methods import GROUND_TRUTH
 from tohgs.methods.base import ContactSource, GeneratorSettings, Method, Prediction, smooth_contact  # noqa: F401
 from tohgs.models.guidance import GuidanceEnergy, GuidanceSettings, select_diverse
 from tohgs.settings import block
@@ -65,6 +68,13 @@ class ContactGrasp(Method):
                              f"contact source {self.source.name!r} is not one (set steer.contact_scale 0)")
         if self.steer.active or self.steer.selects:
             self.require_hand("guided sampling and sample-score-keep (settings.steer) pose hands")
+        self.signed = bool(getattr(self.grasp_model, "reads_signed_contact", False))
+        if self.signed and self.source.name != GROUND_TRUTH:
+            raise ValueError(f"method {self.name!r}: its grasp model {self.cfg['grasp']!r} reads contact maps signed by "
+                             f"the thumb's contact (thumb_sign), which only the ground truth's grasps give; contact "
+                             f"{self.source.name!r} samples maps without it (use contact: {GROUND_TRUTH})")
+        if self.signed:
+            self.require_hand("maps signed by the thumb's contact pose the ground truth's hands")
 
     def _steer(self) -> dict:
         """The guidance arguments of ``sample_grasps``: none unless ``settings.steer`` is active (a grasp
@@ -105,12 +115,14 @@ class ContactGrasp(Method):
             extra = {}
             if self.steer.contact_active:  # guided off the object points near the scene
                 extra = {"steer": self.steer, "distance_alpha": shard.alpha_distance}
-            contact = self.source.maps(batch, shard, row, generator, **extra)
+            contact = self.source.maps(batch, shard, row, generator, signed_by=self.hand if self.signed else None,
+                                       **extra)
             if len(contact) == 0:  # ground truth, and the configuration has no task grasp
                 return None
             t1 = time.perf_counter()
             grasp = self.grasp_model.sample_grasps(batch.with_contact(contact), s.grasp_sampler, s.grasp_steps, generator,
                                                    s.guidance, **self._steer())
+            contact = contact.abs() if self.signed else contact  # stored, selected by: the paper's map
             seconds = {"contact_map": t1 - t0, "grasp": time.perf_counter() - t1}
         info = {}
         if self.steer.selects:

@@ -59,7 +59,7 @@ def _derangement(n: int, generator: torch.Generator) -> torch.Tensor:
 
 @torch.no_grad()
 def shuffled_condition_gap(model, data: MapDataset, n_samples: int = 256, seed: int = 0,
-                           timesteps: tuple[int, ...] = (50, 200, 500, 800)) -> dict:
+                           timesteps: tuple[int, ...] = (50, 200, 500, 800), hand: HandModel | None = None) -> dict:
     """Denoising loss with the true and with shuffled conditions, per timestep and overall.
 
     Args:
@@ -69,6 +69,8 @@ def shuffled_condition_gap(model, data: MapDataset, n_samples: int = 256, seed: 
         data: training items (``per="grasp"``).
         n_samples: items drawn (with replacement, seeded).
         timesteps: the t at which both losses are measured (the same noise for both).
+        hand: the hand model; needed by a GraspDiffuser that reads maps signed by the thumb
+            (``thumb_sign``), whose maps it signs as training does.
 
     Returns:
         ``{"true": {t: loss}, "shuffled": {t: loss}, "gap": (shuffled - true) / true over all t}``; the
@@ -89,8 +91,12 @@ def shuffled_condition_gap(model, data: MapDataset, n_samples: int = 256, seed: 
         perm[same] = perm[same][torch.randperm(int(same.sum()), generator=g)]
         perm = torch.where(perm == torch.arange(n_samples), perm.roll(1), perm)
     sched = model.schedule
-    shuffled = batch.index(perm)
     grasps = model.role == "grasp"
+    if grasps and getattr(model, "reads_signed_contact", False):  # the maps as it was trained on them
+        if hand is None:
+            raise ValueError("a GraspDiffuser reading maps signed by the thumb (thumb_sign) is checked with the hand model")
+        batch = batch.with_contact(model.maps_read(batch.contact, batch.points, batch.grasp, hand))
+    shuffled = batch.index(perm)
     if grasps:
         own = model.condition(batch.points, batch.normals, batch.contact)
         other = model.condition(shuffled.points, shuffled.normals, shuffled.contact)
@@ -158,6 +164,8 @@ def grasp_fit(model, hand: HandModel, data: MapDataset, max_configs: int = 24, s
         pts = torch.as_tensor(items[0]["points"])[None].expand(samples, -1, -1)
         nrm = torch.as_tensor(items[0]["normals"])[None].expand(samples, -1, -1)
         cmap = torch.as_tensor(np.stack([items[k]["contact"] for k in pick]))
+        if getattr(model, "reads_signed_contact", False):  # each map signed by its grasp's thumb
+            cmap = model.maps_read(cmap, pts, true[pick], hand)
         cond = model.condition(pts, nrm, cmap)
         x0 = sample(lambda xt, tt: model(xt, tt, cond), (samples, model.dim), model.diffusion, sampler, steps, g)
         for key, pred in (("model", model.decode(x0, cond)), ("baseline", model.decode(torch.zeros_like(x0), cond))):
@@ -440,7 +448,8 @@ class _Subject:
 #: The checks a component kind may declare (its schema block's ``x-checks``), by name: the key of its result
 #: in ``checks.json`` and the measurement.
 CHECKS: dict[str, tuple[str, Callable[[_Subject], dict]]] = {
-    "shuffled_condition": ("shuffled_condition", lambda s: shuffled_condition_gap(s.model, s.seen, seed=s.seed)),
+    "shuffled_condition": ("shuffled_condition", lambda s: shuffled_condition_gap(s.model, s.seen, seed=s.seed,
+                                                                                  hand=s.hand)),
     "permuted_map": ("permuted_map", lambda s: permuted_map_gap(s.model, s.seen, seed=s.seed)),
     "contact_fit": ("fit", lambda s: contact_fit(s.model, s.plain, seed=s.seed)),
     "grasp_fit": ("fit", lambda s: grasp_fit(s.model, s.hand, s.plain, seed=s.seed)),

@@ -63,6 +63,11 @@ mean the same with any number of training points. The clamps act per sample: a b
 keeps the gradient of the others (clamping the batch mean, as the official code, zeroed it for whole runs).
 Weights (15, 1, 5, 0.002) for Placing and Shelving, (10, 1, 3, 0.005) for Stacking.
 
+With ``thumb_sign`` (beyond the paper; off by default) the contact channel the network reads is signed: negative
+where the hand's nearest vertex is the thumb's (:func:`tohgs.geometry.contact_parts.thumb_signed`). The frame,
+the contact moments and the losses read its absolute value, the paper's map; training signs each map from its
+own grasp, and sampling expects signed maps (given by the ground truth's grasps: ``contact: ground_truth``).
+
 With ``contact_input`` false the network reads the object alone (xyz and normals, no contact channel, the
 network frame, no contact moments): SceneDiffuser's object-only grasp diffusion (Huang et al. CVPR 2023, as
 the paper re-implements it: the same auxiliary losses, which still compare the predicted hand with the true
@@ -77,6 +82,7 @@ import torch
 from torch import nn
 
 from tohgs.data.batch import Batch
+from tohgs.geometry.contact_parts import thumb_signed
 from tohgs.geometry.frames import contact_frame_3d
 from tohgs.geometry.rot6d import grasp_from_palm_rot6d, palm_rot6d
 from tohgs.hand.layout import GRASP_DIM
@@ -123,6 +129,7 @@ class GraspDiffuserConfig:
     contact_features: bool = True  # the contact region's moments added to the pooled condition
     cond_dropout: float = 0.0  # training: the share of samples whose context is replaced by a learnt null
     contact_input: bool = True  # false: the object alone is the condition (SceneDiffuser)
+    thumb_sign: bool = False  # the contact channel signed by the thumb's contact (module docstring)
     mlp: tuple = (64, 128)
     pointnet: dict = field(default_factory=lambda: {
         "sa": [[128, 0.02, 16, [32, 32, 64]], [32, 0.05, 16, [64, 64, 128]], [0, 0.0, 0, [128, 256]]],
@@ -145,6 +152,8 @@ class GraspDiffuserConfig:
         if not self.contact_input and (self.frame != "network" or self.contact_features):
             raise ValueError("a GraspDiffuser without contact_input reads no map: it needs frame 'network' and "
                              "contact_features false")
+        if self.thumb_sign and not self.contact_input:
+            raise ValueError("a GraspDiffuser with thumb_sign reads signed contact maps: it needs contact_input")
         if self.recon_clamp < 0:
             raise ValueError(f"GraspDiffuser recon_clamp must be >= 0 (0: unclamped), not {self.recon_clamp}")
         if self.d_model % self.n_heads:
@@ -301,6 +310,22 @@ class GraspDiffuser(Component):
         """Whether it is conditioned on the batch's contact maps (``contact_input``; SceneDiffuser's is not)."""
         return bool(self.cfg.contact_input)
 
+    @property
+    def reads_signed_contact(self) -> bool:
+        """Whether the maps it samples for are signed by the thumb's contact (``thumb_sign``)."""
+        return bool(self.cfg.thumb_sign)
+
+    def maps_read(self, contact: torch.Tensor, points: torch.Tensor, grasp: torch.Tensor, hand: HandModel
+                  ) -> torch.Tensor:
+        """(B, N) the contact maps of (B, 51) ``grasp`` on (B, N, 3) ``points`` as the network reads them: with
+        ``thumb_sign`` signed by each grasp's thumb (:func:`tohgs.geometry.contact_parts.thumb_signed`), else
+        ``contact`` itself."""
+        if not self.cfg.thumb_sign:
+            return contact
+        with torch.no_grad():
+            vertices = hand(grasp).vertices
+        return thumb_signed(contact, points, vertices, hand.part_labels)
+
     def __init__(self, cfg: GraspDiffuserConfig):
         super().__init__()
         self.cfg = cfg
@@ -365,7 +390,8 @@ class GraspDiffuser(Component):
             raise ValueError("GraspDiffuser.loss needs prepare() first (the hand and the normaliser)")
         b, dev = batch.size, batch.device
         t = torch.randint(0, self.schedule.timesteps, (b,), generator=generator).to(dev)
-        cond = self.condition(batch.points, batch.normals, batch.contact)
+        contact = self.maps_read(batch.contact, batch.points, batch.grasp, self._training["hand"])
+        cond = self.condition(batch.points, batch.normals, contact)
         x0 = self.encode(batch.grasp, cond)
         noise = torch.randn(x0.shape, generator=generator).to(dev)
         x_t = self.schedule.q_sample(x0, noise, t)
@@ -394,7 +420,8 @@ class GraspDiffuser(Component):
         if steer is not None and steer.active:
             if hand is None:
                 raise ValueError("guided sampling (steer) poses hands: it needs the hand model")
-            guide = guidance_step(lambda x: self.decode(x, cond), GuidanceEnergy.of_batch(hand, batch, steer), steer,
+            energy_batch = batch.with_contact(batch.contact.abs()) if self.cfg.thumb_sign else batch  # the paper's map
+            guide = guidance_step(lambda x: self.decode(x, cond), GuidanceEnergy.of_batch(hand, energy_batch, steer), steer,
                                   self.diffusion.timesteps)
         x0 = sample(lambda xt, tt: self.guided(xt, tt, cond, guidance), (batch.size, self.dim), self.diffusion,
                     sampler, steps, generator, batch.device, guide)
@@ -451,8 +478,10 @@ class GraspDiffuser(Component):
 
     def condition(self, points: torch.Tensor, normals: torch.Tensor, contact: torch.Tensor | None) -> GraspCondition:
         """The condition of (B, N, 3) points with (B, N, 3) normals and their (B, N) contact map (not read,
-        and may be None, without ``contact_input``)."""
-        rot, origin = self.frame_of(points, normals, contact)
+        and may be None, without ``contact_input``; signed by the thumb's contact with ``thumb_sign``, whose
+        frame and moments read its absolute value)."""
+        unsigned = contact.abs() if self.cfg.thumb_sign else contact
+        rot, origin = self.frame_of(points, normals, unsigned)
         points = (points - origin[:, None]) @ rot  # x' = R^T (x - o), as row vectors
         normals = normals @ rot
         extra = [contact[..., None]] if self.cfg.contact_input else []
@@ -462,7 +491,7 @@ class GraspDiffuser(Component):
             tokens = self.token_proj(torch.cat([local, points, *extra], -1))
         c = self.cond(glob)
         if self.features is not None:
-            c = c + self.features(contact_moments(points, normals, contact, self.cfg.contact_power))
+            c = c + self.features(contact_moments(points, normals, unsigned, self.cfg.contact_power))
         return GraspCondition(c, tokens, rot, origin, points)
 
     def encode(self, grasp: torch.Tensor, cond: GraspCondition) -> torch.Tensor:

@@ -21,6 +21,7 @@ from tohgs.config import (
     add_seed_replicas,
     evaluation_sd_settings as evaluation_sd_settings_of,
     drop_ground_truth_rows,
+    job_network,
     job_settings,
     load_schema,
     validate_config,

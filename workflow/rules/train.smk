@@ -25,7 +25,7 @@ rule train:
     params:
         code=lambda w: code("train.py", f"models/{COMPONENTS[w.component]['kind']}"),
         kind=lambda w: COMPONENTS[w.component]["kind"],
-        network=lambda w: _canonical(COMPONENTS[w.component]["network"]),
+        network=lambda w: _canonical(job_network(COMPONENTS[w.component], _SCHEMA)),
         settings=component_settings,
     script:
         "../scripts/train.py"
