@@ -99,10 +99,14 @@ def hand_map(hand: HandModel, vertices: torch.Tensor, batch: Batch, alpha: float
 
 
 def fidelity(model, hand: HandModel, batch: Batch, sampler: str, steps: int, seed: int, alpha: float) -> dict:
-    """Errors of one grasp sampled per ground-truth map of the ``batch``'s task grasps, and how alike each
-    sampled hand's own map is to the one it was given, turned hands and others (module docstring)."""
+    """Errors of one grasp sampled per ground-truth map of the ``batch``'s task grasps (signed by their
+    thumbs for a model with ``thumb_sign``), and how alike each sampled hand's own map is to the one it was
+    given, turned hands and others (module docstring)."""
+    given = batch  # a GraspDiffuser that reads maps signed by the thumb (thumb_sign) gets them signed
+    if getattr(model, "reads_signed_contact", False):
+        given = batch.with_contact(model.maps_read(batch.contact, batch.points, batch.grasp, hand))
     with torch.no_grad():
-        pred = model.sample_grasps(batch, sampler, steps, torch.Generator().manual_seed(seed))
+        pred = model.sample_grasps(given, sampler, steps, torch.Generator().manual_seed(seed))
         vp, vt = hand(pred).vertices, hand(batch.grasp).vertices
         alike = map_alike(hand_map(hand, vp, batch, alpha), batch.contact).numpy()
     palm = torch.as_tensor(hand.assets.palm_ids)
