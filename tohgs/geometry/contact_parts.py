@@ -74,8 +74,8 @@ def thumb_signed(contact: torch.Tensor, points: torch.Tensor, vertices: torch.Te
     """(B, N) the contact map ``contact`` (B, N, in [0, 1]) of (B, N, 3) object points made negative where the
     nearest of the (B, V, 3) hand ``vertices`` belongs to the thumb (its ``part_labels`` (V,) one of the thumb's
     joints, as :func:`part_contact` assigns parts): the map with a two-part label, in [-1, 1]. A scalar map
-    says where the hand touches, not with what; its grasp turned about the palm's normal touches nearly the
-    same points (docs/graspdiffuser.md), and the thumb's contact tells the two apart. No gradient."""
+    says where the hand touches, not with what: grasps of one object with much alike maps point different
+    ways (docs/graspdiffuser.md), which the thumb's contact tells apart. No gradient."""
     with torch.no_grad():
         _, idx = nearest_vertex(points, vertices)
         thumb = torch.isin(part_labels, torch.as_tensor(FINGERS["thumb"], device=part_labels.device))
