@@ -250,9 +250,10 @@ def test_an_import_without_ground_truth_leaves_out_exactly_the_rows_that_read_it
     cfg["tables"]["table2"]["rows"].append("f-gt")
     cfg["figures"]["comparisons"] = {"gt": ["dataset"], "mixed": ["ours", "ours-gt-contact"]}
     assert {m for m in cfg["methods"] if reads_ground_truth(m, cfg["methods"])} == {
-        "dataset", "ours-gt-contact", "m-grasptta-gt", "contactgen-gt", "ours-gt-thumb", "f-gt"}
+        "dataset", "ours-gt-contact", "m-grasptta-gt", "contactgen-gt", "ours-gt-thumb", "ours-gt-refined", "f-gt"}
     dropped = drop_ground_truth_rows(cfg, "no truth here")
-    assert dropped == ["dataset", "ours-gt-contact", "contactgen-gt", "ours-gt-thumb", "m-grasptta-gt", "f-gt"]  # in the tables' order
+    assert dropped == ["dataset", "ours-gt-contact", "contactgen-gt", "ours-gt-thumb", "ours-gt-refined", "m-grasptta-gt",
+                       "f-gt"]  # in the tables' order
     assert cfg["tables"]["table_contactgen_gate"]["rows"] == ["contactgen"]
     assert cfg["tables"]["table1"]["rows"] == ["grasptta", "f-grasptta", "contactgen", "scenediffuser", "flex", "ours"]
     assert cfg["tables"]["table1"]["pending"] == [{"label": "Dataset", "reason": "no truth here"},

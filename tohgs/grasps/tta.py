@@ -64,6 +64,43 @@ class TTASettings:
             raise ValueError(f"search_every must be at least 1, got {self.search_every}")
 
 
+@dataclass(frozen=True)
+class RefineSettings(TTASettings):
+    """The adaptation run on a contact-map method's sampled hands with its own maps as the consistency
+    target (:func:`refine_to_maps`; beyond the paper, whose GraspDiffuser hands are final): off (``steps``
+    0) by default; the consistency weighed 100x GraspTTA's, so that the given map, not only the nearest
+    object points, moves the hand."""
+
+    steps: int = 0
+    w_consistency: float = 100.0
+
+
+class FixedMaps:
+    """A stand-in for ContactNet in :func:`adapt_many` whose map is a given one: (B, N) ``maps`` of the
+    B hands' object points, whatever the hand (what a contact-map method's hand should touch)."""
+
+    def __init__(self, maps: torch.Tensor):
+        self.maps = maps
+
+    def object_cache(self, points: torch.Tensor) -> ObjectCache:
+        """The maps of the hands whose (b, N, 3) ``points`` these are (all of them, or one problem's rows)."""
+        if points.shape[0] != self.maps.shape[0]:
+            raise ValueError(f"FixedMaps holds {self.maps.shape[0]} maps, asked for {points.shape[0]} hands")
+        empty = points.new_zeros(points.shape[0], 0)
+        return ObjectCache(self.maps.to(points), empty, points.new_zeros(*points.shape[:2], 0))
+
+    @staticmethod
+    def predict_map_cached(cache: ObjectCache, vertices: torch.Tensor, contact: torch.Tensor) -> torch.Tensor:
+        return cache.local
+
+
+def refine_to_maps(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, maps: torch.Tensor, alpha: float,
+                   settings: TTASettings) -> tuple[torch.Tensor, dict[str, list[float]]]:
+    """(B, 51) ``grasp`` on (B, N, 3) ``points`` refined by the adaptation (:func:`adapt`) with the (B, N)
+    ``maps`` in [0, 1] as the consistency term's target (each hand its own), and the energy's history."""
+    return adapt(hand, grasp, points, FixedMaps(maps), alpha, settings)
+
+
 def clamp_to_limits(grasp: torch.Tensor, limits: torch.Tensor) -> torch.Tensor:
     """(B, 51) grasps with the 45 finger numbers clamped to (15, 3, 2) ``[min, max]`` limits, radians."""
     lim = limits.reshape(FINGER_POSE_DIM, 2).to(grasp)

@@ -11,7 +11,9 @@ the object (the map shards' contact map, at their ``alpha_contact``). With ``set
 paper) the grasp generator's sampling is guided out of the scene at both poses, the contact diffuser's off the
 object points near the scene, and more grasps may be sampled than kept: the best by the same energy, picked
 for diversity (:mod:`tohgs.models.guidance`; the stored ``seconds`` gain ``select``, the diagnostics the
-candidates' and the kept grasps' mean energy). A grasp model that reads maps signed by the thumb's contact
+candidates' and the kept grasps' mean energy). With ``settings.refine`` (beyond the paper) each sampled hand
+is refined against its own map by GraspTTA's adaptation, the map the consistency term's target
+(:func:`tohgs.grasps.tta.refine_to_maps`; the stored ``seconds`` gain ``refine``). A grasp model that reads maps signed by the thumb's contact
 (a GraspDiffuser with ``thumb_sign``, beyond the paper) is given the ground truth's maps signed by their own
 grasps; the stored maps are the unsigned ones.
 """
@@ -26,6 +28,7 @@ import torch
 
 from tohgs.geometry.cloud import even_subset
 from tohgs.geometry.hand_object import contact_values
+from tohgs.grasps.tta import RefineSettings, refine_to_maps
 from tohgs.methods import GROUND_TRUTH
 from tohgs.methods.base import ContactSource, GeneratorSettings, Method, Prediction, smooth_contact  # noqa: F401
 from tohgs.models.guidance import GuidanceEnergy, GuidanceSettings, select_diverse
@@ -36,13 +39,14 @@ from tohgs.settings import block
 class ContactGraspSettings(GeneratorSettings):
     """A generator's sampling settings (``sampler`` and ``steps`` the contact component's), the grasp
     generator's sampler (``grasp_sampler``, ``grasp_steps``: the official ancestral DDPM over all 1000 steps
-    by default) and ``steer``, the scene-aware guidance of its sampling (beyond the paper; every lever off by
-    default). A job is not given ``steer`` while it is at its defaults (its schema block's ``x-optional``:
+    by default), ``steer``, the scene-aware guidance of its sampling, and ``refine``, the sampled hands
+    refined against their maps (both beyond the paper; every lever off by default). A job is not given ``steer`` while it is at its defaults (its schema block's ``x-optional``:
     so that its settings are those of before it existed): the defaults then."""
 
     grasp_sampler: str = "ddpm"
     grasp_steps: int = 1000
     steer: GuidanceSettings = block(GuidanceSettings, optional=True)
+    refine: RefineSettings = block(RefineSettings, optional=True)
 
 
 class ContactGrasp(Method):
@@ -68,6 +72,9 @@ class ContactGrasp(Method):
                              f"contact source {self.source.name!r} is not one (set steer.contact_scale 0)")
         if self.steer.active or self.steer.selects:
             self.require_hand("guided sampling and sample-score-keep (settings.steer) pose hands")
+        self.refine = self.settings.refine
+        if self.refine.steps:
+            self.require_hand("refining hands against their maps (settings.refine) poses them")
         self.signed = bool(getattr(self.grasp_model, "reads_signed_contact", False))
         if self.signed and self.source.name != GROUND_TRUTH:
             raise ValueError(f"method {self.name!r}: its grasp model {self.cfg['grasp']!r} reads contact maps signed by "
@@ -124,6 +131,10 @@ class ContactGrasp(Method):
                                                    s.guidance, **self._steer())
             contact = contact.abs() if self.signed else contact  # stored, selected by: the paper's map
             seconds = {"contact_map": t1 - t0, "grasp": time.perf_counter() - t1}
+        if self.refine.steps:  # GraspTTA's adaptation with each hand's own map as the target
+            t2 = time.perf_counter()
+            grasp, _ = refine_to_maps(self.hand, grasp, batch.points, contact, shard.alpha_contact, self.refine)
+            seconds["refine"] = time.perf_counter() - t2
         info = {}
         if self.steer.selects:
             t2 = time.perf_counter()
