@@ -13,9 +13,9 @@ object points near the scene, and more grasps may be sampled than kept: the best
 for diversity (:mod:`tohgs.models.guidance`; the stored ``seconds`` gain ``select``, the diagnostics the
 candidates' and the kept grasps' mean energy). With ``settings.refine`` (beyond the paper) each sampled hand
 is refined against its own map by GraspTTA's adaptation, the map the consistency term's target
-(:func:`tohgs.grasps.tta.refine_to_maps`; the stored ``seconds`` gain ``refine``). A grasp model that reads maps signed by the thumb's contact
-(a GraspDiffuser with ``thumb_sign``, beyond the paper) is given the ground truth's maps signed by their own
-grasps; the stored maps are the unsigned ones.
+(:func:`tohgs.grasps.tta.refine_to_maps`; the stored ``seconds`` gain ``refine``). A grasp model that reads
+maps signed by the thumb's contact (a GraspDiffuser with ``thumb_sign``, beyond the paper) is given the ground
+truth's maps signed by their own grasps; the stored maps are the unsigned ones.
 """
 
 from __future__ import annotations
@@ -40,8 +40,9 @@ class ContactGraspSettings(GeneratorSettings):
     """A generator's sampling settings (``sampler`` and ``steps`` the contact component's), the grasp
     generator's sampler (``grasp_sampler``, ``grasp_steps``: the official ancestral DDPM over all 1000 steps
     by default), ``steer``, the scene-aware guidance of its sampling, and ``refine``, the sampled hands
-    refined against their maps (both beyond the paper; every lever off by default). A job is not given ``steer`` while it is at its defaults (its schema block's ``x-optional``:
-    so that its settings are those of before it existed): the defaults then."""
+    refined against their maps (both beyond the paper; every lever off by default). A job is not given
+    ``steer`` or ``refine`` while it is at its defaults (their schema blocks' ``x-optional``: so that its
+    settings are those of before they existed): the defaults then."""
 
     grasp_sampler: str = "ddpm"
     grasp_steps: int = 1000
