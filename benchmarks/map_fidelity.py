@@ -93,7 +93,7 @@ def map_alike(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return (a * b).sum(-1) / (a.norm(dim=-1) * b.norm(dim=-1)).clamp_min(1e-12)
 
 
-def hand_map(hand: HandModel, vertices: torch.Tensor, batch: Batch, alpha: float) -> torch.Tensor:
+def hand_map(vertices: torch.Tensor, batch: Batch, alpha: float) -> torch.Tensor:
     """(B, N) the contact map (the shards' definition) of (B, V, 3) hand ``vertices`` on the batch's points."""
     return contact_values(batch.points, vertices.to(batch.points), alpha)[0]
 
@@ -108,7 +108,7 @@ def fidelity(model, hand: HandModel, batch: Batch, sampler: str, steps: int, see
     with torch.no_grad():
         pred = model.sample_grasps(given, sampler, steps, torch.Generator().manual_seed(seed))
         vp, vt = hand(pred).vertices, hand(batch.grasp).vertices
-        alike = map_alike(hand_map(hand, vp, batch, alpha), batch.contact).numpy()
+        alike = map_alike(hand_map(vp, batch, alpha), batch.contact).numpy()
     palm = torch.as_tensor(hand.assets.palm_ids)
     palm_err = ((vp[:, palm].mean(1) - vt[:, palm].mean(1)).norm(dim=-1) * 100).numpy()
     vert_err = ((vp - vt).norm(dim=-1).mean(1) * 100).numpy()
@@ -134,7 +134,7 @@ def turned_own_map(hand: HandModel, batch: Batch, alpha: float, degrees: float =
         centre = v[:, palm].mean(1, keepdim=True)
         turn = axis_angle_to_matrix(normal * np.radians(degrees))
         turned = centre + (v - centre) @ turn.transpose(1, 2)
-        return float(map_alike(hand_map(hand, turned, batch, alpha), batch.contact).median())
+        return float(map_alike(hand_map(turned, batch, alpha), batch.contact).median())
 
 
 def kabsch(target: np.ndarray, source: np.ndarray) -> np.ndarray:
@@ -165,10 +165,10 @@ def map_twins(data: MapDataset) -> dict:
             np.fill_diagonal(sim, -np.inf)
             rot = rotvec_to_matrix(np.stack([sh.grasp[r][3:6] for r in rows]).astype(np.float64))
             clouds = [sh.points[sh.grasp_config[r]].astype(np.float64) for r in rows]
-            for k, twin in enumerate(sim.argmax(1)):
-                rel = rot[k].T @ kabsch(clouds[k], clouds[twin]) @ rot[twin]
-                alike.append(sim[k, twin])
-                angle.append(np.degrees(np.arccos(np.clip((np.trace(rel) - 1) / 2, -1.0, 1.0))))
+            twins = sim.argmax(1)
+            aligned = np.stack([kabsch(clouds[k], clouds[t]) @ rot[t] for k, t in enumerate(twins)])
+            alike += sim[np.arange(len(rows)), twins].tolist()
+            angle += np.degrees(rotation_angle(torch.as_tensor(rot), torch.as_tensor(aligned)).numpy()).tolist()
     alike, angle = np.asarray(alike), np.asarray(angle)
     near = alike >= TWIN_ALIKE
     return {"grasps": len(alike), "twin_alike_median": float(np.median(alike)) if len(alike) else float("nan"),

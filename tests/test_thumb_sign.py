@@ -95,8 +95,7 @@ def test_training_signs_each_map_by_its_own_grasp_and_the_ground_truth_row_store
     row gives the GraspDiffuser signed maps and stores the unsigned ones; a sampled map source is refused."""
     from types import SimpleNamespace
 
-    import tohgs.methods.base as method_base
-    import tohgs.models.grasp_diffuser as gd_module
+    import tohgs.geometry.contact_parts as contact_parts
     from tohgs.methods.contact_grasp import ContactGrasp, ContactGraspSettings
     from tohgs.models.checks import shuffled_condition_gap
 
@@ -107,8 +106,7 @@ def test_training_signs_each_map_by_its_own_grasp_and_the_ground_truth_row_store
         calls.append((points.shape[0], vertices.shape))
         return -contact
 
-    monkeypatch.setattr(gd_module, "thumb_signed", all_thumb)
-    monkeypatch.setattr(method_base, "thumb_signed", all_thumb)
+    monkeypatch.setattr(contact_parts, "thumb_signed", all_thumb)  # what training and the method both sign with
     net = {"d_model": 16, "n_blocks": 1, "pointnet": SMALL_PN, "thumb_sign": True}
     model, data = prepared_component("grasp_diffuser", net, tmp / "shard-0.zarr", hand)
     seen = []

@@ -21,11 +21,15 @@ each assigned joint, which is what ContactGen's solver pulls each hand part towa
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import torch
 
 from tohgs.geometry.hand_object import contact_values, nearest_vertex
 from tohgs.hand.layout import FINGERS, N_JOINTS
+
+if TYPE_CHECKING:
+    from tohgs.hand.model import HandModel
 
 N_PARTS = N_JOINTS  # one part per MANO joint (16)
 
@@ -80,3 +84,11 @@ def thumb_signed(contact: torch.Tensor, points: torch.Tensor, vertices: torch.Te
         _, idx = nearest_vertex(points, vertices)
         thumb = torch.isin(part_labels, torch.as_tensor(FINGERS["thumb"], device=part_labels.device))
         return torch.where(thumb[idx], -contact, contact)
+
+
+def thumb_signed_by(hand: HandModel, grasp: torch.Tensor, points: torch.Tensor, contact: torch.Tensor) -> torch.Tensor:
+    """(B, N) the (B, N) maps ``contact`` of the (B, 51) grasps ``grasp`` on (B, N, 3) ``points``, signed by
+    each grasp's thumb (:func:`thumb_signed`; the hands posed without gradient)."""
+    with torch.no_grad():
+        vertices = hand(grasp).vertices
+    return thumb_signed(contact, points, vertices, hand.part_labels)

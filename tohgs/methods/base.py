@@ -11,7 +11,7 @@ import torch
 
 from tohgs.data.batch import Batch
 from tohgs.data.maps import MapShard
-from tohgs.geometry.contact_parts import thumb_signed
+from tohgs.geometry.contact_parts import thumb_signed_by
 from tohgs.geometry.neighbours import nearest_neighbours
 from tohgs.methods import GROUND_TRUTH, NO_CONTACT
 from tohgs.settings import build_blocks
@@ -188,9 +188,7 @@ class ContactSource:
         contact = torch.as_tensor(shard.contact[ids], device=batch.device)
         if signed_by is not None and len(ids):
             grasp = torch.as_tensor(shard.grasp[ids], dtype=batch.points.dtype, device=batch.device)
-            with torch.no_grad():
-                vertices = signed_by(grasp).vertices
-            contact = thumb_signed(contact, batch.points, vertices, signed_by.part_labels)
+            contact = thumb_signed_by(signed_by, grasp, batch.points, contact)
         return contact
 
 

@@ -82,7 +82,7 @@ import torch
 from torch import nn
 
 from tohgs.data.batch import Batch
-from tohgs.geometry.contact_parts import thumb_signed
+from tohgs.geometry.contact_parts import thumb_signed_by
 from tohgs.geometry.frames import contact_frame_3d
 from tohgs.geometry.rot6d import grasp_from_palm_rot6d, palm_rot6d
 from tohgs.hand.layout import GRASP_DIM
@@ -320,11 +320,7 @@ class GraspDiffuser(Component):
         """(B, N) the contact maps of (B, 51) ``grasp`` on (B, N, 3) ``points`` as the network reads them: with
         ``thumb_sign`` signed by each grasp's thumb (:func:`tohgs.geometry.contact_parts.thumb_signed`), else
         ``contact`` itself."""
-        if not self.cfg.thumb_sign:
-            return contact
-        with torch.no_grad():
-            vertices = hand(grasp).vertices
-        return thumb_signed(contact, points, vertices, hand.part_labels)
+        return thumb_signed_by(hand, grasp, points, contact) if self.cfg.thumb_sign else contact
 
     def __init__(self, cfg: GraspDiffuserConfig):
         super().__init__()
