@@ -1,13 +1,17 @@
-"""Convex decomposition: convex shortcut, CoACD on a concave brick, and the cache."""
+"""Convex decomposition: convex shortcut, CoACD on a concave brick, the cache, and a crash of CoACD."""
 
 from __future__ import annotations
+
+import re
+import sys
 
 import numpy as np
 import pytest
 import trimesh
 
+from tohgs.assets import decomposition
 from tohgs.assets.bricks import make_brick
-from tohgs.assets.decomposition import DecompositionSettings, cache_key, convex_decomposition
+from tohgs.assets.decomposition import DecompositionError, DecompositionSettings, cache_key, convex_decomposition
 
 FAST = DecompositionSettings(threshold=0.2, max_convex_hull=6, preprocess_resolution=20, resolution=500,
                              mcts_iterations=20, mcts_depth=2, mcts_nodes=5)
@@ -52,3 +56,17 @@ def test_hull_vertex_cap_keeps_a_close_inner_hull():
     assert len(capped.vertices) <= 64 and capped.is_convex
     assert 0.8 * sphere.volume < capped.volume <= sphere.volume + 1e-12
     assert cap_hull_vertices(capped, 64) is capped  # already small enough: unchanged
+
+
+@pytest.mark.parametrize("child, expected", [
+    ("import os; os.abort()", "killed by SIGABRT"),
+    ("import sys; sys.exit('bad mesh')", "exited with status 1 on this mesh (bad mesh)"),
+])
+def test_a_crash_of_coacd_is_an_error_of_the_mesh_not_of_the_process(tmp_path, monkeypatch, child, expected):
+    # CoACD aborts the process on some meshes (a failed C++ assertion); its child stands in for it here.
+    monkeypatch.setattr(decomposition, "WORKER", [sys.executable, "-c", child])
+    with pytest.raises(DecompositionError, match=re.escape(expected)):
+        convex_decomposition(make_brick("l-shape"), FAST, tmp_path)
+    assert not list(tmp_path.rglob("*.npz")), "a crash left parts in the cache"
+    # A convex mesh never reaches CoACD, so the crash cannot reach it either.
+    assert convex_decomposition(make_brick("cube"), FAST, tmp_path)[1] == "hull"

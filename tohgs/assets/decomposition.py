@@ -6,21 +6,39 @@ already (nearly) convex is its own decomposition: its convex hull is used withou
 
 Results are cached under ``<cache_dir>/coacd/<sha256>.npz``, keyed by the mesh's vertices and faces, the
 CoACD settings and CoACD's version, so a rerun after an unrelated setting change costs nothing.
+
+CoACD runs in a child process (:mod:`tohgs.assets.coacd_worker`): on some meshes its C++
+code fails an assertion and aborts the process (2 of 64 of pybullet_data's ``random_urdfs`` drawn at
+random, e.g. ``378/378.obj``), which no ``try`` in the caller can catch. A crashed child raises
+:class:`DecompositionError`, which the objects stage turns into a rejection of that object instead of a
+failed run.
 """
 
 from __future__ import annotations
 
+import json
 import logging
-from dataclasses import dataclass
+import signal
+import subprocess
+import sys
+import tempfile
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
+from tohgs.assets import coacd_worker
 from tohgs.cache import load_or_compute
 from tohgs.io import content_key
 
 log = logging.getLogger(__name__)
+
+WORKER = [sys.executable, "-m", coacd_worker.__name__]  # the child's command; + IN.npz OUT.npz
+
+
+class DecompositionError(RuntimeError):
+    """CoACD failed on a mesh: its process crashed or exited with an error (the message says how)."""
 
 
 @dataclass(frozen=True)
@@ -81,19 +99,40 @@ def cache_key(mesh: trimesh.Trimesh, settings: DecompositionSettings) -> str:
                        settings.__dict__, _coacd_version())
 
 
-def _run_coacd(mesh: trimesh.Trimesh, s: DecompositionSettings) -> list[trimesh.Trimesh]:
-    import coacd
+def _crash_reason(proc: subprocess.CompletedProcess) -> str:
+    """How the child ended, for :class:`DecompositionError`: the signal or exit code and the last line of
+    its standard error (CoACD's assertion, a Python traceback's last line)."""
+    rc = proc.returncode
+    try:
+        how = f"was killed by {signal.Signals(-rc).name}" if rc < 0 else f"exited with status {rc}"
+    except ValueError:
+        how = f"was killed by signal {-rc}"
+    lines = [ln.strip() for ln in (proc.stderr or "").splitlines() if ln.strip()]
+    last = lines[-1] if lines else "no message"
+    if "Assertion" in last:  # a C++ assertion's line starts with the whole function signature
+        last = last[last.index("Assertion"):]
+    return f"CoACD {how} on this mesh ({last[-300:]})"
 
-    coacd.set_log_level("error")
-    parts = coacd.run_coacd(
-        coacd.Mesh(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)),
-        threshold=s.threshold, max_convex_hull=s.max_convex_hull, preprocess_mode="auto",
-        preprocess_resolution=s.preprocess_resolution, resolution=s.resolution,
-        mcts_iterations=s.mcts_iterations, mcts_max_depth=s.mcts_depth, mcts_nodes=s.mcts_nodes, seed=s.seed,
-    )
+
+def _run_coacd(mesh: trimesh.Trimesh, s: DecompositionSettings) -> list[trimesh.Trimesh]:
+    """CoACD's parts of ``mesh`` as convex hulls of positive volume, computed in a child process.
+
+    Raises:
+        DecompositionError: the child crashed (CoACD aborted) or failed; the message says how.
+    """
+    with tempfile.TemporaryDirectory(prefix="tohgs-coacd-") as tmp:
+        src, dst = Path(tmp) / "mesh.npz", Path(tmp) / "parts.npz"
+        with open(src, "wb") as fh:
+            np.savez(fh, vertices=np.asarray(mesh.vertices, dtype=np.float64),
+                     faces=np.asarray(mesh.faces, dtype=np.int64), settings=np.str_(json.dumps(asdict(s))))
+        proc = subprocess.run([*WORKER, str(src), str(dst)], capture_output=True, text=True, check=False)
+        if proc.returncode != 0 or not dst.is_file():
+            raise DecompositionError(_crash_reason(proc))
+        with np.load(dst, allow_pickle=False) as z:
+            raw = [(z[f"v{i}"], z[f"f{i}"]) for i in range(int(z["n"]))]
     out = []
-    for verts, faces in parts:
-        hull = trimesh.Trimesh(np.asarray(verts, dtype=np.float64), np.asarray(faces, dtype=np.int64)).convex_hull
+    for verts, faces in raw:
+        hull = trimesh.Trimesh(verts, faces).convex_hull
         if hull.volume > 0:
             out.append(hull)
     return out
@@ -125,6 +164,9 @@ def convex_decomposition(mesh: trimesh.Trimesh, settings: DecompositionSettings,
     Returns:
         ``(parts, method)``: convex hulls (each a ``Trimesh``) and how they were made:
         ``"hull"`` (convex mesh), ``"coacd"`` or ``"coacd-cached"``.
+
+    Raises:
+        DecompositionError: CoACD crashed on the mesh (nothing is cached then).
     """
     parts, method = _decompose(mesh, settings, cache_dir)
     return [cap_hull_vertices(p, settings.max_hull_vertices) for p in parts], method

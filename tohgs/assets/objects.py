@@ -29,7 +29,7 @@ import pandas as pd
 import trimesh
 
 from tohgs.assets.bricks import make_brick
-from tohgs.assets.decomposition import DecompositionSettings, convex_decomposition
+from tohgs.assets.decomposition import DecompositionError, DecompositionSettings, convex_decomposition
 from tohgs.assets.manifest import record_object_files
 from tohgs.assets.mesh import (COLLISION_MESH, OBJECT_MESH, OBJECT_URDF, MeshError, MeshLimits, choose_scale,
                                load_mesh, mass_properties, normalise, repair_and_validate)
@@ -122,9 +122,9 @@ def prepare_object(spec: dict[str, Any] | ObjectSpec, out_dir: str | Path, size:
                    cache_dir: str | Path | None, limits: dict[str, Any] | MeshLimits | None = None) -> dict[str, Any]:
     """Run the objects stage for one object and write its folder atomically.
 
-    A bad mesh does not raise (whatever trimesh or the repair raise on it): the folder then holds a
-    ``meta.json`` with ``status: rejected`` and the reason, so the rest of the run proceeds. So does a
-    source file beyond ``limits`` (``objects.limits``; None: the defaults of :class:`MeshLimits`), refused
+    A bad mesh does not raise (whatever trimesh or the repair raise on it, or a crash of CoACD on it): the
+    folder then holds a ``meta.json`` with ``status: rejected`` and the reason, so the rest of the run
+    proceeds. So does a source file beyond ``limits`` (``objects.limits``; None: the defaults of :class:`MeshLimits`), refused
     before it is parsed.
 
     Returns:
@@ -145,7 +145,13 @@ def prepare_object(spec: dict[str, Any] | ObjectSpec, out_dir: str | Path, size:
             write_json(tmp / "meta.json", meta)
             return meta
         settings = DecompositionSettings(**decomposition)
-        parts, method = convex_decomposition(mesh, settings, cache_dir)
+        try:
+            parts, method = convex_decomposition(mesh, settings, cache_dir)
+        except DecompositionError as exc:  # CoACD aborted on this mesh: a rejection, not a failed run
+            meta.update(status="rejected", reason=f"convex decomposition failed: {exc}")
+            log.warning("%s rejected: %s", spec.name, meta["reason"])
+            write_json(tmp / "meta.json", meta)
+            return meta
         mp = mass_properties(mesh, density)
         mesh.export(tmp / OBJECT_MESH)
         write_obj_parts(tmp / COLLISION_MESH, parts)
