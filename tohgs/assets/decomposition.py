@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import signal
 import subprocess
 import sys
@@ -125,7 +126,11 @@ def _run_coacd(mesh: trimesh.Trimesh, s: DecompositionSettings) -> list[trimesh.
         with open(src, "wb") as fh:
             np.savez(fh, vertices=np.asarray(mesh.vertices, dtype=np.float64),
                      faces=np.asarray(mesh.faces, dtype=np.int64), settings=np.str_(json.dumps(asdict(s))))
-        proc = subprocess.run([*WORKER, str(src), str(dst)], capture_output=True, text=True, check=False)
+        # The child imports tohgs from where this process did (a Snakemake script finds it on a sys.path
+        # entry the child would not inherit).
+        root = str(Path(coacd_worker.__file__).resolve().parents[2])
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))}
+        proc = subprocess.run([*WORKER, str(src), str(dst)], capture_output=True, text=True, check=False, env=env)
         if proc.returncode != 0 or not dst.is_file():
             raise DecompositionError(_crash_reason(proc))
         with np.load(dst, allow_pickle=False) as z:
