@@ -124,8 +124,8 @@ def prepare_object(spec: dict[str, Any] | ObjectSpec, out_dir: str | Path, size:
 
     A bad mesh does not raise (whatever trimesh or the repair raise on it, or a crash of CoACD on it): the
     folder then holds a ``meta.json`` with ``status: rejected`` and the reason, so the rest of the run
-    proceeds. So does a source file beyond ``limits`` (``objects.limits``; None: the defaults of :class:`MeshLimits`), refused
-    before it is parsed.
+    proceeds. So does a source file beyond ``limits`` (``objects.limits``; None: the defaults of
+    :class:`MeshLimits`), refused before it is parsed.
 
     Returns:
         The metadata written to ``meta.json``.
