@@ -136,22 +136,22 @@ def prepare_object(spec: dict[str, Any] | ObjectSpec, out_dir: str | Path, size:
     meta: dict[str, Any] = {**spec.to_dict(), "status": "ok", "reason": ""}
     out_dir = Path(out_dir)
     with atomic_dir(out_dir) as tmp:
-        try:
-            mesh, scale, repairs = build_object_mesh(spec, size, brick_scale, seed, limits)
-        except Exception as exc:  # noqa: BLE001 - any failure on a bad file is a rejection, never a crash
-            reason = str(exc) if isinstance(exc, MeshError) else f"invalid mesh ({type(exc).__name__}: {exc})"
+
+        def rejected(reason: str) -> dict[str, Any]:  # the folder holds only meta.json, with the reason
             meta.update(status="rejected", reason=reason)
             log.warning("%s rejected: %s", spec.name, reason)
             write_json(tmp / "meta.json", meta)
             return meta
+
+        try:
+            mesh, scale, repairs = build_object_mesh(spec, size, brick_scale, seed, limits)
+        except Exception as exc:  # noqa: BLE001 - any failure on a bad file is a rejection, never a crash
+            return rejected(str(exc) if isinstance(exc, MeshError) else f"invalid mesh ({type(exc).__name__}: {exc})")
         settings = DecompositionSettings(**decomposition)
         try:
             parts, method = convex_decomposition(mesh, settings, cache_dir)
         except DecompositionError as exc:  # CoACD aborted on this mesh: a rejection, not a failed run
-            meta.update(status="rejected", reason=f"convex decomposition failed: {exc}")
-            log.warning("%s rejected: %s", spec.name, meta["reason"])
-            write_json(tmp / "meta.json", meta)
-            return meta
+            return rejected(f"convex decomposition failed: {exc}")
         mp = mass_properties(mesh, density)
         mesh.export(tmp / OBJECT_MESH)
         write_obj_parts(tmp / COLLISION_MESH, parts)
