@@ -38,7 +38,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from base_commit import commit_label, cpu_name  # noqa: E402
 
-from tohgs.config import load_configs  # noqa: E402
+from tohgs.config import load_configs, replica_name  # noqa: E402
 from tohgs.io import atomic_path  # noqa: E402
 from tohgs.metrics.bootstrap import BootstrapSettings, cells, config_keys, config_stats, resample_weights  # noqa: E402
 from tohgs.metrics.claims import claim_rows  # noqa: E402
@@ -48,15 +48,10 @@ from tohgs.metrics.tables import metric_table, read_metrics  # noqa: E402
 COLUMNS = ["ts", "qr", "pv_avg", "init_opp", "goal_opp"]
 
 
-def replica_name(method: str, seed: int, first: int) -> str:
-    """The file stem of ``method``'s replica for ``seed`` (the first seed keeps the method's own name)."""
-    return method if seed == first else f"{method}-seed{seed}"
-
-
 def compare(results: Path, tasks: list[str], better: str, than: str, seeds: list[int],
             t: QualityThresholds, bootstrap: BootstrapSettings) -> dict:
     """Per task, both rows pooled over ``seeds``, each training alone and the claim (module docstring)."""
-    replicas = {m: {replica_name(m, s, seeds[0]): s for s in seeds} for m in (better, than)}
+    replicas = {m: {replica_name(m, seeds, s): s for s in seeds} for m in (better, than)}
     paths = [results / f"metrics/{task}/{name}.parquet" for task in tasks for reps in replicas.values()
              for name in reps]
     missing = [str(p) for p in paths if not p.exists()]
@@ -80,7 +75,7 @@ def compare(results: Path, tasks: list[str], better: str, than: str, seeds: list
                 sel = in_task[(in_task.method == m) & (in_task.seed == s)]
                 stats = config_stats(sel, keys, t.max_pv, t.max_sd)
                 lo, hi = np.percentile(cells(weights, stats)["ts"], [tail, 100 - tail])
-                per_training[replica_name(m, s, seeds[0])] = {
+                per_training[replica_name(m, seeds, s)] = {
                     "ts": float(cells(one, stats)["ts"][0]), "ts_half_width": float((hi - lo) / 2)}
         table = pooled[pooled.task == task].set_index("method")
         row = verdicts[verdicts.task == task].iloc[0]
