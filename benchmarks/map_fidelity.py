@@ -196,11 +196,15 @@ def nearest_other(hand: HandModel, data: MapDataset, idx: np.ndarray) -> float:
 def collisions(results: Path, task: str, method: str) -> dict:
     """Init OPP of ``method``'s test grasps turned by more than :data:`TURNED_DEG` from their map's grasp
     (the ``dataset`` row's, sample for sample) and of the others (module docstring)."""
-    truth, _ = read_predictions(results / f"predictions/{task}/dataset.zarr")
+    truth, truth_attrs = read_predictions(results / f"predictions/{task}/dataset.zarr")
     pred, attrs = read_predictions(results / f"predictions/{task}/{method}.zarr")
     if not (np.array_equal(truth["object_id"], pred["object_id"])
             and np.array_equal(truth["config_index"], pred["config_index"])):
         raise SystemExit(f"{task}: the dataset and {method} predictions are not of the same configurations")
+    seeds = [dict(a.get("config") or {}).get("seed", 0) for a in (truth_attrs, attrs)]
+    if seeds[0] != seeds[1]:  # the ground-truth pick is drawn from the prediction seed: other grasps
+        raise SystemExit(f"{task}: {method} was sampled with seed {seeds[1]}, the dataset row with seed {seeds[0]}: "
+                         "its ground-truth maps are of other grasps than the dataset row's, sample for sample")
     rows = pd.read_parquet(results / f"metrics/{task}/{method}.parquet")
     vocab = list(attrs["objects"])
     keys = pd.DataFrame({"object": np.repeat([vocab[int(o)] for o in pred["object_id"]], pred["kept"].shape[1]),
