@@ -24,7 +24,6 @@ stores and their metrics are kept under ``<results>/hold_tolerance/`` and reused
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -44,7 +43,7 @@ from tohgs.data.predictions import read_predictions, write_predictions  # noqa: 
 from tohgs.hand import HandAssets  # noqa: E402
 from tohgs.hand.layout import TRANSLATION_DIM  # noqa: E402
 from tohgs.hand.rotations import axis_angle_to_matrix, matrix_to_axis_angle  # noqa: E402
-from tohgs.io import atomic_path  # noqa: E402
+from tohgs.io import atomic_path, write_json  # noqa: E402
 from tohgs.metrics.evaluate import evaluate_predictions  # noqa: E402
 from tohgs.metrics.quality_thresholds import QualityThresholds  # noqa: E402
 
@@ -132,8 +131,7 @@ def main(argv: list[str] | None = None) -> dict:
             levels.append(level)
             print(f"{task} scale {scale:g}: " + " ".join(f"{k} {v:.3f}" for k, v in level.items() if k != "scale"))
         out["tasks"][task] = levels
-    with atomic_path(a.out) as tmp:
-        tmp.write_text(json.dumps(out, indent=1) + "\n")
+    write_json(a.out, out)
     return out
 
 

@@ -34,7 +34,6 @@ About 20 s per task and checkpoint on 2 cores (DDPM 1000 over 2 x 160 maps in on
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -55,7 +54,7 @@ from tohgs.hand import HandAssets, HandModel  # noqa: E402
 from tohgs.geometry.hand_object import contact_values  # noqa: E402
 from tohgs.hand.assets import rotvec_to_matrix  # noqa: E402
 from tohgs.hand.rotations import axis_angle_to_matrix, rotation_angle  # noqa: E402
-from tohgs.io import atomic_path  # noqa: E402
+from tohgs.io import write_json  # noqa: E402
 from tohgs.models.checkpoint import load_component  # noqa: E402
 from tohgs.models.component import build_component  # noqa: E402
 
@@ -271,9 +270,7 @@ def main(argv: list[str] | None = None) -> dict:
             res["collisions"] = collisions(a.results, task, a.method)
             print(f"{task} {a.method}: " + " ".join(f"{k} {v:.2f}" for k, v in res["collisions"].items()))
         out["tasks"][task] = res
-    a.out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(a.out) as tmp:
-        tmp.write_text(json.dumps(out, indent=1) + "\n")
+    write_json(a.out, out)
     return out
 
 

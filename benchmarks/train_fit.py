@@ -21,7 +21,6 @@ GraspDiffuser sampled by DDPM 1000). The training predictions and metrics are ke
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -36,7 +35,7 @@ from base_commit import commit_label, cpu_name  # noqa: E402
 from tohgs.config import evaluation_sd_settings, load_configs, run_cache_dir  # noqa: E402
 from tohgs.data.predictions import read_predictions  # noqa: E402
 from tohgs.hand import HandAssets  # noqa: E402
-from tohgs.io import atomic_path  # noqa: E402
+from tohgs.io import atomic_path, write_json  # noqa: E402
 from tohgs.metrics.evaluate import evaluate_predictions  # noqa: E402
 from tohgs.metrics.quality_thresholds import QualityThresholds  # noqa: E402
 from tohgs.metrics.tables import summarize  # noqa: E402
@@ -98,8 +97,7 @@ def main(argv: list[str] | None = None) -> dict:
                               "test": summary(pd.read_parquet(test_metrics), t)}
         for split, s in out["tasks"][task].items():
             print(f"{task} {split:5s} " + " ".join(f"{k} {v:.3f}" for k, v in s.items()))
-    with atomic_path(a.out) as tmp:
-        tmp.write_text(json.dumps(out, indent=1) + "\n")
+    write_json(a.out, out)
     return out
 
 

@@ -25,7 +25,6 @@ Seconds: it reads metric files only. A missing replica's file is named in the er
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -39,7 +38,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from base_commit import commit_label, cpu_name  # noqa: E402
 
 from tohgs.config import load_configs, replica_name  # noqa: E402
-from tohgs.io import atomic_path  # noqa: E402
+from tohgs.io import write_json  # noqa: E402
 from tohgs.metrics.bootstrap import BootstrapSettings, cells, config_keys, config_stats, resample_weights  # noqa: E402
 from tohgs.metrics.claims import claim_rows  # noqa: E402
 from tohgs.metrics.quality_thresholds import QualityThresholds  # noqa: E402
@@ -115,9 +114,7 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"{task}: {a.better} - {a.than} pooled {r['difference']:+.3f} [{r['lo']:+.3f}, {r['hi']:+.3f}] "
               f"({r['verdict']}; per object {r['objects_favour']}/{r['objects']}, p {r['p_objects']:.2f}); "
               f"trainings: {trainings}")
-    a.out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(a.out) as tmp:
-        tmp.write_text(json.dumps(out, indent=1) + "\n")
+    write_json(a.out, out)
     return out
 
 
