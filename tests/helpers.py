@@ -3,7 +3,9 @@ that no test module imports another. Shared fixtures are in tests/conftest.py.""
 
 from __future__ import annotations
 
+import importlib.util
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -17,6 +19,18 @@ from tohgs.data.maps import MapDataset
 from tohgs.data.scenes import SceneSet
 from tohgs.models.component import build_component
 from tohgs.models.pose_prior import PosePrior, PosePriorConfig
+
+# --- benchmarks ------------------------------------------------------------------------------------------
+
+
+def load_benchmark(name: str) -> ModuleType:
+    """The script ``benchmarks/<name>.py`` as a module (the benchmarks folder is not a package)."""
+    path = Path(__file__).resolve().parent.parent / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
 
 # --- objects ---------------------------------------------------------------------------------------------
 

@@ -1,18 +1,13 @@
 """benchmarks/hold_tolerance.py's perturbation: one error per grasp, the same in the hand's frame at both poses."""
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from helpers import load_benchmark
 from tohgs.geometry.grasp import transform_grasp
 from tohgs.hand import load_hand_assets
 
-BENCH = Path(__file__).resolve().parent.parent / "benchmarks" / "hold_tolerance.py"
-spec = importlib.util.spec_from_file_location("hold_tolerance", BENCH)
-hold_tolerance = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(hold_tolerance)
+hold_tolerance = load_benchmark("hold_tolerance")
 
 
 def test_a_perturbed_goal_hand_is_the_perturbed_initial_hand_carried_with_the_object():

@@ -1,12 +1,8 @@
 """benchmarks/job_times.py reads a Snakemake log: each job's start, finish and threads, and the idle cores."""
 
-import importlib.util
-from pathlib import Path
+from helpers import load_benchmark
 
-BENCH = Path(__file__).resolve().parent.parent / "benchmarks" / "job_times.py"
-spec = importlib.util.spec_from_file_location("job_times", BENCH)
-job_times = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(job_times)
+job_times = load_benchmark("job_times")
 
 # Two runs appended (job ids restart), a job that never finishes, threads 2 on one job: Snakemake 9's layout.
 LOG = """\
@@ -38,7 +34,6 @@ Finished jobid: 1 (Rule: evaluate)
 rule table:
     jobid: 3
 """
-
 
 def test_log_jobs_pairs_each_finish_with_the_latest_job_of_its_id(tmp_path):
     log = tmp_path / "run.log"

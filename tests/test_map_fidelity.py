@@ -1,19 +1,14 @@
 """benchmarks/map_fidelity.py's measures of likeness between maps and of the rotation between two clouds."""
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 import pytest
 import torch
 
+from helpers import load_benchmark
 from tohgs.data.predictions import write_predictions
 
-BENCH = Path(__file__).resolve().parent.parent / "benchmarks" / "map_fidelity.py"
-spec = importlib.util.spec_from_file_location("map_fidelity", BENCH)
-map_fidelity = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(map_fidelity)
+map_fidelity = load_benchmark("map_fidelity")
 
 
 def test_map_alike_is_one_for_the_same_map_whatever_its_scale_and_about_zero_for_an_unrelated_one():

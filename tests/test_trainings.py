@@ -1,7 +1,6 @@
 """benchmarks/trainings.py: two rows pooled over their trainings (seed replicas), each training alone, and the
 claim that one beats the other by the claims table's tests."""
 
-import importlib.util
 import json
 from pathlib import Path
 
@@ -9,12 +8,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from helpers import load_benchmark
 from tohgs.metrics.evaluate import COLUMNS
 
-BENCH = Path(__file__).resolve().parent.parent / "benchmarks" / "trainings.py"
-spec = importlib.util.spec_from_file_location("trainings", BENCH)
-trainings = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(trainings)
+trainings = load_benchmark("trainings")
 
 
 def _rows(method: str, p_good: np.ndarray, rng: np.random.Generator, objects: int = 12, configs: int = 2,
