@@ -54,7 +54,7 @@ class _Data:
         return self.items[i]
 
 
-def _items(n: int, points: int, scene_points: int, rng: np.random.Generator) -> list[dict]:
+def synthetic_items(n: int, points: int, scene_points: int, rng: np.random.Generator) -> list[dict]:
     """``n`` synthetic samples: an object cloud on a 4 cm sphere, a scene cloud, maps and a grasp."""
     out = []
     for _ in range(n):
@@ -126,7 +126,7 @@ def main() -> None:
     training, maps = cfg["training"], cfg["maps"]["points"]
     hand = load_hand(cfg["hand"]["model"])
     rng = np.random.default_rng(0)
-    train_items = _items(32, training["train_points"] or maps["n_points"], maps["n_scene_points"], rng)
+    train_items = synthetic_items(32, training["train_points"] or maps["n_points"], maps["n_scene_points"], rng)
     out = {"benchmark": "training steps at the paper's sizes", "config": Path(args.config).name, "device": "cpu",
            "machine": platform.processor() or platform.machine(), "torch": torch.__version__, "threads": 1,
            "train_points": training["train_points"], "n_points": maps["n_points"],
@@ -137,7 +137,7 @@ def main() -> None:
                                                              train_items, args.steps)
     # sampling: one test configuration, 16 samples of the paper's points, DDIM (prediction.sampler)
     s = cfg["prediction"]["samples"]
-    test = Batch.collate(_items(1, maps["n_points"], maps["n_scene_points"], rng)).repeat(s)
+    test = Batch.collate(synthetic_items(1, maps["n_points"], maps["n_scene_points"], rng)).repeat(s)
     gen = torch.Generator().manual_seed(0)
     sampling = {}
     if "contact_diffuser" in models:

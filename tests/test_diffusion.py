@@ -375,7 +375,7 @@ def test_contact_smoothing_averages_over_neighbours_and_keeps_regions():
 
 
 def test_neighbour_mean_and_max_equal_the_gathered_reduction():
-    """ContactDiffuser's local mixing reduces over the neighbours one at a time: the same values (and, with
+    """ContactDiffuser's local mixing (embedding bags with autograd, one neighbour at a time without): the same values (and, with
     distinct neighbours, gradients) as gathering every neighbour and reducing, with and without autograd."""
     from tohgs.models.contact_diffuser import neighbour_mean_max
     from tohgs.models.pointnet2 import gather
@@ -397,6 +397,35 @@ def test_neighbour_mean_and_max_equal_the_gathered_reduction():
         mean, top = neighbour_mean_max(x, idx)
     torch.testing.assert_close(mean, ref_mean.detach(), atol=1e-6, rtol=0)
     torch.testing.assert_close(top, ref_max.detach(), atol=0, rtol=0)
+
+
+def test_point_attention_equals_torch_transformer_layer_bit_for_bit():
+    """ContactDiffuser's batch-first attention layer loads torch's TransformerEncoderLayer's weights and gives
+    its outputs and gradients exactly (a faster layout of the same computation), training and evaluating."""
+    from tohgs.models.contact_diffuser import PointAttention
+
+    torch.manual_seed(0)
+    ref = torch.nn.TransformerEncoderLayer(32, 4, 64, 0.0, activation="gelu", batch_first=True, norm_first=True)
+    ours = PointAttention(32, 4, 64, 0.0)
+    ours.load_state_dict(ref.state_dict())  # strict: the same parameter names
+    x = torch.randn(3, 50, 32, requires_grad=True)
+    w = torch.randn(3, 50, 32)
+    ref_out = ref(x)
+    (ref_grad,) = torch.autograd.grad((ref_out * w).sum(), x)
+    out = ours(x)
+    (grad,) = torch.autograd.grad((out * w).sum(), x)
+    assert torch.equal(out, ref_out) and torch.equal(grad, ref_grad)
+    fast = torch.backends.mha.get_fastpath_enabled()
+    torch.backends.mha.set_fastpath_enabled(False)
+    try:
+        with torch.no_grad():
+            assert torch.equal(ours.eval()(x), ref.eval()(x))
+    finally:
+        torch.backends.mha.set_fastpath_enabled(fast)
+    # the weights are used: another layer's differ
+    other = PointAttention(32, 4, 64, 0.0).eval()
+    with torch.no_grad():
+        assert (other(x) - ours(x)).abs().max() > 1e-3
 
 
 def test_grasp_diffuser_attention_with_cached_keys_equals_multihead_attention():
