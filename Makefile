@@ -145,6 +145,7 @@ benchmark: $(STAMP)
 	$(PY) benchmarks/bench_sdf.py
 	$(PY) benchmarks/bench_prior.py
 	$(PY) benchmarks/bench_maps.py
+	$(PY) benchmarks/bench_contact_diffuser.py
 
 clean:
 	rm -rf results logs .snakemake
