@@ -375,8 +375,9 @@ def test_contact_smoothing_averages_over_neighbours_and_keeps_regions():
 
 
 def test_neighbour_mean_and_max_equal_the_gathered_reduction():
-    """ContactDiffuser's local mixing (embedding bags with autograd, one neighbour at a time without): the same values (and, with
-    distinct neighbours, gradients) as gathering every neighbour and reducing, with and without autograd."""
+    """ContactDiffuser's local mixing (embedding bags with autograd, one neighbour at a time without): the same
+    values (and, with distinct neighbours, gradients) as gathering every neighbour and reducing, with and
+    without autograd."""
     from tohgs.models.contact_diffuser import neighbour_mean_max
     from tohgs.models.pointnet2 import gather
 

@@ -136,7 +136,9 @@ class PointAttention(nn.TransformerEncoderLayer):
     def __init__(self, d: int, heads: int, ff: int, dropout: float):
         super().__init__(d, heads, ff, dropout, activation="gelu", batch_first=True, norm_first=True)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:  # noqa: D102 (B, N, d) -> (B, N, d)
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, N, d) tokens -> (B, N, d): self-attention, then the feed-forward, each after its LayerNorm and
+        added to its input."""
         x = x + self._sa_block(self.norm1(x), None, None)
         return x + self._ff_block(self.norm2(x))
 
@@ -144,8 +146,8 @@ class PointAttention(nn.TransformerEncoderLayer):
         a = self.self_attn
         b, n, d = x.shape
         heads = a.num_heads
-        qkv = nn.functional.linear(x, a.in_proj_weight, a.in_proj_bias).view(b, n, 3, heads, d // heads).permute(2, 0, 3, 1, 4)
-        q, k, v = qkv.unbind(0)
+        qkv = nn.functional.linear(x, a.in_proj_weight, a.in_proj_bias).view(b, n, 3, heads, d // heads)
+        q, k, v = qkv.permute(2, 0, 3, 1, 4).unbind(0)  # each (B, heads, N, d / heads)
         out = nn.functional.scaled_dot_product_attention(q, k, v, dropout_p=a.dropout if self.training else 0.0)
         out = nn.functional.linear(out.transpose(1, 2).reshape(b, n, d), a.out_proj.weight, a.out_proj.bias)
         return self.dropout1(out)
