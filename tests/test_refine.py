@@ -31,8 +31,10 @@ def test_refining_against_a_hands_own_map_lowers_the_energy_and_zero_steps_keep_
     start = true.clone()
     start[:, :3] += torch.tensor([0.01, -0.005, 0.0])  # the hand 1.1 cm off the grasp whose map it is given
     refined, history = refine_to_maps(hand, start, points, maps, 100.0, RefineSettings(steps=30))
-    assert history["consistency"][-1] < history["consistency"][0]
-    assert history["energy"][-1] < history["energy"][0]
+    # The energy falls (19.1 -> 15.5 on an Intel Xeon); its consistency term alone need not: the hand trades
+    # it against the penetration of these points (the hand's own surface, noisy), and on an Intel Xeon it
+    # rose (1.60 -> 2.34) where an AMD EPYC saw it fall, so the test holds the sum, with a margin.
+    assert history["energy"][-1] < 0.95 * history["energy"][0]
     assert not torch.equal(refined, start)
     kept, _ = refine_to_maps(hand, start, points, maps, 100.0, RefineSettings(steps=0))
     torch.testing.assert_close(kept, start)

@@ -79,7 +79,12 @@ def test_every_training_split_has_task_grasps_with_margin(smoke_run, capsys):
 # 0.005 at the default scale (docs/graspdiffuser.md). The ContactDiffusers (x0 prediction with local mixing
 # since issue 39: an untrained x0 network's output already correlates with the condition by chance) give a
 # shuffled-condition gap of 0.42-0.49, untrained copies -0.035 to 0.047 (seeds 0-2 and the test's draw).
-MIN_GRASP_CONTEXT_GAP = 0.08
+# The smoke data differ between CPUs (prior grasps, scenes): on an Intel Xeon (Dec 2026, at 82bffe1) the
+# smoke GraspDiffusers' context gaps were 0.14 / 0.04 / 0.10 (Placing / Stacking / Shelving; on Stacking the
+# frame derived from the map carries most of the condition: its whole-condition gap was 0.93), so the
+# trained bound sits below the lowest seen and well above the untrained copies' bound.
+MIN_GRASP_CONTEXT_GAP = 0.025
+MAX_UNTRAINED_GRASP_CONTEXT_GAP = 0.01  # untrained copies: 0.004 at most
 MIN_CONTACT_GAP = 0.2
 # ContactDiffuser's permuted-map gap (its loss on maps whose values are permuted across the points): 0.54,
 # 0.75 and 0.57 on the three tasks of a smoke run at 3f49b72 (0.015-0.082 with epsilon prediction and no
@@ -122,7 +127,7 @@ def test_the_smoke_models_read_their_condition_and_untrained_copies_do_not(smoke
         shards = sorted((smoke_run / f"results/maps/{task}/train").glob("shard-*.zarr"))
         seen = MapDataset(shards, per="grasp", rotation="z", seed=0)
         torch.manual_seed(0)
-        for name, key, bound in (("grasp_diffuser", "gap_context", MIN_GRASP_CONTEXT_GAP / 4),
+        for name, key, bound in (("grasp_diffuser", "gap_context", MAX_UNTRAINED_GRASP_CONTEXT_GAP),
                                  ("contact_diffuser", "gap", MIN_CONTACT_GAP / 2)):
             _, ckpt = load_component(smoke_run / f"results/models/{task}/{name}.pt")
             fresh = build_component(ckpt["kind"], ckpt["network_config"]).eval()
